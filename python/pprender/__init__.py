@@ -1,0 +1,110 @@
+"""pprender: polarized microfacet BRDFs and Pulse Polarization Ranging returns.
+
+Conventions (the full statement is at the top of ``src/optics/mod.rs`` and in the README):
+
+* Local frame with the macro normal ``n = +z``. ``wi`` points from the surface toward the
+  transmitter, ``wo`` toward the receiver; both unit vectors with ``z >= 0``.
+* Stokes ``(I, Q, U, V)``; each beam has a transverse basis ``(x, y)`` with ``y = k x x``;
+  ``V = 2 Im(Ex Ey*)`` with ``exp(-i omega t)`` fields and ``eta = n + i k``. Mueller
+  matrices are ``(..., 4, 4)`` arrays, ``M[..., i, j]`` maps input Stokes ``j`` to output ``i``.
+* ``frame="sp"``: the incident beam in the s/p basis of the plane (n, wi), the reflected beam
+  in that of (n, wo) (``x = s``). ``frame="mitsuba"``: Mitsuba 3's ``stokes_basis``.
+* A flat mirror at normal incidence is ``R diag(1, 1, -1, -1)``: linear states are kept,
+  circular handedness flips.
+* SI units: metres, seconds, radians; BRDFs in 1/sr without the cosine factor.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+from ._core import Error, Material, __version__
+
+__all__ = ["Error", "Material", "__version__", "brdf", "albedo", "specular", "white_furnace"]
+
+
+def _directions(x: object, name: str) -> np.ndarray:
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise Error(f"invalid {name}: cannot convert to a float64 array ({e})") from None
+    if a.ndim == 0 or a.shape[-1] != 3:
+        raise Error(f"invalid {name}: expected shape (..., 3), got {a.shape}")
+    return a
+
+
+def _check_frame(frame: str) -> str:
+    if frame not in ("sp", "mitsuba"):
+        raise Error(f'invalid frame = {frame!r}: expected "sp" or "mitsuba"')
+    return frame
+
+
+def brdf(material: Material, wi: object, wo: object, frame: str = "sp") -> np.ndarray:
+    """Mueller BRDF ``f(wi, wo)`` of ``material``, shape ``(..., 4, 4)``, in 1/sr.
+
+    ``wi`` (toward the transmitter) and ``wo`` (toward the receiver) are unit vectors in the
+    local frame (``n = +z``), arrays of shape ``(..., 3)`` that broadcast against each other.
+    The cosine factor is not included: the reflected radiance is ``f cos(theta_i)`` times
+    the incident irradiance. Directions must have ``z >= 0`` and unit length within 1e-6
+    (they are renormalized); ``z < 0``, non-finite values or other lengths raise
+    :class:`pprender.Error`. A direction exactly on the horizon (``z == 0``) gives the
+    zero matrix, as in Mitsuba. ``frame`` is ``"sp"`` or ``"mitsuba"`` (module docstring).
+    """
+    _check_frame(frame)
+    a = _directions(wi, "wi")
+    b = _directions(wo, "wo")
+    try:
+        a, b = np.broadcast_arrays(a, b)
+    except ValueError:
+        raise Error(f"wi and wo shapes {a.shape} and {b.shape} do not broadcast") from None
+    shape = a.shape[:-1]
+    out = _core.brdf(
+        material,
+        np.ascontiguousarray(a.reshape(-1, 3)),
+        np.ascontiguousarray(b.reshape(-1, 3)),
+        frame,
+    )
+    return out.reshape(shape + (4, 4))
+
+
+def specular(material: Material, wi: object, frame: str = "sp") -> np.ndarray:
+    """Dimensionless Mueller reflectance of the flat interface of ``material`` (the mirror
+    limit, roughness ignored) for incidence ``wi`` into ``wo = (-wi.x, -wi.y, wi.z)``,
+    shape ``(..., 4, 4)``."""
+    _check_frame(frame)
+    a = _directions(wi, "wi")
+    shape = a.shape[:-1]
+    return _core.specular(material, np.ascontiguousarray(a.reshape(-1, 3)), frame).reshape(shape + (4, 4))
+
+
+def albedo(material: Material, wi: object, order: int = 128) -> np.ndarray:
+    """Directional albedo for unpolarized incident light, ``int M00(wi, wo) cos(theta_o) dwo``,
+    shape ``(...)`` for ``wi`` of shape ``(..., 3)``.
+
+    The single-bounce term is integrated numerically over the half vector with an
+    ``order x order`` Gauss-Legendre rule (split at the horizon and at the masking
+    switch; see ``src/brdf/albedo.rs``), independently of the per-material tables; the
+    multiple and diffuse terms are integrated analytically. With ``F = 1``
+    (``eta=inf``) and ``terms=("single", "multiple")`` the result is 1 to within the
+    table error (below 1e-5, see ``tests/test_energy.py``).
+    """
+    a = _directions(wi, "wi")
+    shape = a.shape[:-1]
+    if not isinstance(order, (int, np.integer)):
+        raise Error(f"invalid order = {order!r}: must be an integer in [8, 4096]")
+    norms = np.linalg.norm(a, axis=-1)
+    if not np.all(np.isfinite(a)):
+        raise Error("invalid wi: not finite")
+    if np.any(np.abs(norms - 1.0) > 1e-6):
+        raise Error("invalid wi: directions must be unit vectors (|w| - 1 within 1e-6)")
+    if np.any(a[..., 2] < 0):
+        raise Error("invalid wi: below the horizon (z < 0)")
+    cos_i = np.clip(a[..., 2] / norms, 0.0, 1.0)
+    return _core.albedo(material, np.ascontiguousarray(cos_i.reshape(-1)), int(order)).reshape(shape)
+
+
+def white_furnace(distribution: str = "blinn_phong", **kwargs: object) -> Material:
+    """A material with ``F = 1`` (a perfect conductor, ``eta=inf``): the white-furnace
+    test material. Keyword arguments are passed to :class:`Material`."""
+    return Material(distribution, eta=complex(np.inf, 0.0), **kwargs)  # type: ignore[arg-type]

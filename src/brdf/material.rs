@@ -1,0 +1,321 @@
+//! [`Material`]: distribution, roughness, index, masking model, enabled terms, and the
+//! tables derived from them.
+
+use crate::microfacet::masking::{self, ZTable, TABLE_NODES};
+use crate::microfacet::{Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
+use crate::optics::fresnel::{average_reflectance, Eta};
+use crate::{Error, Result};
+
+/// Which BRDF terms are summed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Terms {
+    pub single: bool,
+    pub multiple: bool,
+    pub diffuse: bool,
+}
+
+impl Terms {
+    /// Parse term names: "single", "multiple", "diffuse" ("double" arrives with the
+    /// double-bounce model and is refused until then).
+    pub fn parse<S: AsRef<str>>(names: &[S]) -> Result<Self> {
+        let mut t = Terms {
+            single: false,
+            multiple: false,
+            diffuse: false,
+        };
+        for n in names {
+            match n.as_ref() {
+                "single" => t.single = true,
+                "multiple" => t.multiple = true,
+                "diffuse" => t.diffuse = true,
+                other => {
+                    return Err(Error::param(
+                        "terms",
+                        format!("{other:?}"),
+                        "each term must be one of \"single\", \"multiple\", \"diffuse\"",
+                    ))
+                }
+            }
+        }
+        if !(t.single || t.multiple || t.diffuse) {
+            return Err(Error::param("terms", "()", "enable at least one term"));
+        }
+        Ok(t)
+    }
+
+    pub fn names(&self) -> Vec<&'static str> {
+        let mut v = vec![];
+        if self.single {
+            v.push("single");
+        }
+        if self.multiple {
+            v.push("multiple");
+        }
+        if self.diffuse {
+            v.push("diffuse");
+        }
+        v
+    }
+}
+
+/// Everything a user specifies; [`Material::new`] validates it and builds the tables.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MaterialSpec {
+    pub distribution: Distribution,
+    pub eta: Eta,
+    pub shadowing: Shadowing,
+    /// `None`: the default for the shadowing model ("seed" for APS, "none" for Smith).
+    pub correlation: Option<Correlation>,
+    pub smith_g1: SmithG1,
+    pub masking: MaskingEval,
+    pub terms: Terms,
+    pub diffuse_albedo: f64,
+}
+
+/// Albedo tables of one layer, in `z` (see [`ZTable`]).
+#[derive(Debug, Clone)]
+pub struct AlbedoTable {
+    /// Directional albedo `E(theta)`.
+    pub e: ZTable,
+    /// `E_avg = 2 int E(mu) mu dmu`.
+    pub e_avg: f64,
+}
+
+/// A validated material with its caches.
+#[derive(Debug, Clone)]
+pub struct Material {
+    pub spec: MaterialSpec,
+    pub correlation: Correlation,
+    /// APS masking excess `N_D(theta)` table (when `masking = Table` and `shadowing = Aps`).
+    pub(crate) n_table: Option<ZTable>,
+    /// Single-scattering albedo with `F = 1`, for the multiple term.
+    pub(crate) e_white: Option<AlbedoTable>,
+    /// Kulla-Conty factor `F_ms = F_avg^2 E_avg / (1 - F_avg (1 - E_avg))`.
+    pub(crate) f_ms: f64,
+    /// Albedo of the specular layer (single + multiple, real Fresnel), for the diffuse term.
+    pub(crate) e_spec: Option<AlbedoTable>,
+}
+
+/// Nodes of the albedo tables, and the quadrature order used to fill them.
+pub const ALBEDO_NODES: usize = 256;
+pub const ALBEDO_ORDER: usize = 128;
+
+impl Material {
+    pub fn new(spec: MaterialSpec) -> Result<Self> {
+        spec.distribution.validate()?;
+        match spec.eta {
+            Eta::PerfectConductor => {}
+            Eta::Complex(e) => {
+                if !(e.re.is_finite() && e.im.is_finite()) {
+                    return Err(Error::param(
+                        "eta",
+                        e,
+                        "must be finite (use eta=inf for a perfect conductor)",
+                    ));
+                }
+                if e.im < 0.0 {
+                    return Err(Error::param(
+                        "eta",
+                        e,
+                        "imaginary part k must be >= 0 (eta = n + ik, absorbing k > 0)",
+                    ));
+                }
+                if e.re < 0.0 || (e.re == 0.0 && e.im == 0.0) {
+                    return Err(Error::param(
+                        "eta",
+                        e,
+                        "real part n must be > 0 (or n >= 0 with k > 0)",
+                    ));
+                }
+            }
+        }
+        if !(spec.diffuse_albedo.is_finite() && (0.0..=1.0).contains(&spec.diffuse_albedo)) {
+            return Err(Error::param(
+                "diffuse_albedo",
+                spec.diffuse_albedo,
+                "must be in [0, 1]",
+            ));
+        }
+        if spec.terms.diffuse != (spec.diffuse_albedo > 0.0) && spec.terms.diffuse {
+            return Err(Error::param(
+                "diffuse_albedo",
+                spec.diffuse_albedo,
+                "term \"diffuse\" needs diffuse_albedo > 0",
+            ));
+        }
+        if spec.shadowing == Shadowing::None && (spec.terms.multiple || spec.terms.diffuse) {
+            return Err(Error::param(
+                "shadowing",
+                "\"none\"",
+                "terms \"multiple\" and \"diffuse\" need an energy-conserving masking: \"aps\" or \"smith\"",
+            ));
+        }
+        if spec.masking == MaskingEval::Seed
+            && !(spec.shadowing == Shadowing::Aps
+                && matches!(spec.distribution, Distribution::BlinnPhong { .. }))
+        {
+            return Err(Error::param("masking", "\"seed\"", "the seed's closed form exists for shadowing=\"aps\" with distribution=\"blinn_phong\" only"));
+        }
+        let correlation = spec.correlation.unwrap_or(match spec.shadowing {
+            Shadowing::Aps => Correlation::Seed,
+            _ => Correlation::None,
+        });
+        let mut mat = Material {
+            spec,
+            correlation,
+            n_table: None,
+            e_white: None,
+            f_ms: 1.0,
+            e_spec: None,
+        };
+        let dist = mat.spec.distribution;
+        if mat.spec.shadowing == Shadowing::Aps && mat.spec.masking == MaskingEval::Table {
+            mat.n_table = Some(ZTable::build(dist.scale(), TABLE_NODES, |t| {
+                masking::aps_excess(&dist, t)
+            }));
+        }
+        if mat.spec.terms.multiple || mat.spec.terms.diffuse {
+            let white = mat.albedo_table(false, None);
+            let f_avg = average_reflectance(mat.spec.eta);
+            let e_avg = white.e_avg;
+            mat.f_ms = f_avg * f_avg * e_avg / (1.0 - f_avg * (1.0 - e_avg));
+            mat.e_white = Some(white);
+        }
+        if mat.spec.terms.diffuse {
+            let with_ms = if mat.spec.terms.multiple {
+                mat.e_white.clone()
+            } else {
+                None
+            };
+            mat.e_spec = Some(mat.albedo_table(true, with_ms.as_ref()));
+        }
+        Ok(mat)
+    }
+
+    /// Tabulate the single-bounce albedo (with Fresnel or with `F = 1`), plus the multiple
+    /// term's share `(1 - E_white) F_ms` when `ms` is given.
+    fn albedo_table(&self, fresnel: bool, ms: Option<&AlbedoTable>) -> AlbedoTable {
+        let f_ms = self.f_ms;
+        let e = ZTable::build(self.spec.distribution.scale(), ALBEDO_NODES, |theta| {
+            let c = theta.cos();
+            let mut v = super::albedo::single_albedo(self, c, fresnel, ALBEDO_ORDER);
+            if let Some(w) = ms {
+                v += (1.0 - w.e.eval(c, theta.sin())).max(0.0) * f_ms;
+            }
+            v
+        });
+        let e_avg = average_over_cosine(&e);
+        AlbedoTable { e, e_avg }
+    }
+
+    /// The masking excess `N(k)` such that `P(k) = c/(c + N)` and `P(k)/c = 1/(c + N)`
+    /// for a direction with `cos theta = c`, `sin theta = s` (APS: `N_D`; Smith: `c Lambda`).
+    #[inline]
+    pub fn masking_excess(&self, c: f64, s: f64) -> f64 {
+        match self.spec.shadowing {
+            Shadowing::None => 0.0,
+            Shadowing::Smith => {
+                c * masking::smith_lambda(&self.spec.distribution, self.spec.smith_g1, c, s * s)
+            }
+            Shadowing::Aps => match self.spec.masking {
+                MaskingEval::Table => self.n_table.as_ref().unwrap().eval(c, s).max(0.0),
+                MaskingEval::Exact => masking::aps_excess(&self.spec.distribution, s.atan2(c)),
+                MaskingEval::Seed => {
+                    let m = match self.spec.distribution {
+                        Distribution::BlinnPhong { m } => m,
+                        _ => unreachable!("checked in Material::new"),
+                    };
+                    let p = seed_p(m, s.atan2(c));
+                    if p > 0.0 {
+                        c * (1.0 / p - 1.0)
+                    } else {
+                        f64::MAX
+                    }
+                }
+            },
+        }
+    }
+
+    /// `E(theta)` of the white (F = 1) single-bounce term, if tabulated.
+    pub fn white_albedo(&self, c: f64, s: f64) -> Option<f64> {
+        self.e_white.as_ref().map(|t| t.e.eval(c, s))
+    }
+
+    /// Multiple-scattering value `f_ms(wi, wo)` (1/sr) from cosines/sines of both directions.
+    #[inline]
+    pub fn multiple(&self, ci: f64, si: f64, co: f64, so: f64) -> f64 {
+        let t = self.e_white.as_ref().expect("multiple term enabled");
+        let denom = std::f64::consts::PI * (1.0 - t.e_avg);
+        if denom <= 1e-14 {
+            return 0.0;
+        }
+        let a = (1.0 - t.e.eval(ci, si)).max(0.0);
+        let b = (1.0 - t.e.eval(co, so)).max(0.0);
+        self.f_ms * a * b / denom
+    }
+
+    /// Diffuse (paint) value (1/sr).
+    #[inline]
+    pub fn diffuse(&self, ci: f64, si: f64, co: f64, so: f64) -> f64 {
+        let t = self.e_spec.as_ref().expect("diffuse term enabled");
+        let denom = std::f64::consts::PI * (1.0 - t.e_avg);
+        if denom <= 1e-14 {
+            return 0.0;
+        }
+        let a = (1.0 - t.e.eval(ci, si)).max(0.0);
+        let b = (1.0 - t.e.eval(co, so)).max(0.0);
+        self.spec.diffuse_albedo * a * b / denom
+    }
+
+    /// Analytic hemispherical integrals of the multiple and diffuse terms for incidence
+    /// `(c, s)`: `int f cos(theta_o) d omega_o` = `(1 - E(wi)) F_ms` and `rho_d (1 - E_s(wi))`.
+    pub fn lambertian_albedo(&self, c: f64, s: f64) -> (f64, f64) {
+        let ms = if self.spec.terms.multiple {
+            let t = self.e_white.as_ref().unwrap();
+            if t.e_avg < 1.0 - 1e-14 {
+                (1.0 - t.e.eval(c, s)).max(0.0) * self.f_ms
+            } else {
+                0.0
+            }
+        } else {
+            0.0
+        };
+        let d = if self.spec.terms.diffuse {
+            let t = self.e_spec.as_ref().unwrap();
+            if t.e_avg < 1.0 - 1e-14 {
+                self.spec.diffuse_albedo * (1.0 - t.e.eval(c, s)).max(0.0)
+            } else {
+                0.0
+            }
+        } else {
+            0.0
+        };
+        (ms, d)
+    }
+}
+
+/// `2 int_0^1 E(mu) mu dmu` from a table, by Gauss-Legendre on panels in theta that are
+/// fine near grazing on the distribution's scale.
+fn average_over_cosine(t: &ZTable) -> f64 {
+    // integrate over z: theta(z) monotone; use mu dmu = -cos sin dtheta.
+    let f = |z: f64| {
+        let th = ZTable::theta_of_z(t.scale, z);
+        // d theta / dz for cot theta = s z/(1-z): theta = atan2(1-z, s z)
+        let s = t.scale;
+        let den = (1.0 - z) * (1.0 - z) + s * s * z * z;
+        let dth_dz = -s / den;
+        2.0 * t.eval_z(z) * th.cos() * th.sin() * (-dth_dz)
+    };
+    let mut total = 0.0;
+    let n = 16;
+    for i in 0..n {
+        let (a, b) = (i as f64 / n as f64, (i + 1) as f64 / n as f64);
+        total += crate::quad::integrate(32, a, b, f);
+    }
+    total
+}
+
+// TEMPORARY until microfacet::seed lands (lead's note): the exact P.
+fn seed_p(m: f64, theta: f64) -> f64 {
+    masking::aps_p(&Distribution::BlinnPhong { m }, theta)
+}

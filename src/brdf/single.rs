@@ -1,0 +1,121 @@
+//! Single-bounce term and the specular (flat-interface) Mueller matrix.
+
+use super::material::Material;
+use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, Frame, V3};
+use crate::optics::fresnel::{fresnel_amplitudes, C64};
+use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
+
+/// Jones matrix, in the beam frames `(x_in, y_in) -> (x_out, y_out)`, of a reflection off a
+/// facet with normal `h` for the incident beam `k_in = -wi` (polarization ray tracing).
+#[inline]
+fn facet_jones(wi: V3, wo: V3, h: V3, rs: C64, rp: C64, bases: (V3, V3, V3, V3)) -> Jones {
+    let (x_in, y_in, x_out, y_out) = bases;
+    let k_in = neg(wi);
+    // s = normalize(k_in x h); when k_in is along h (normal incidence on the facet) any
+    // vector perpendicular to it will do: the result does not depend on the choice there.
+    let c = cross(k_in, h);
+    let s = if dot(c, c) > 1e-24 {
+        normalize(c)
+    } else {
+        x_in
+    };
+    let p_in = cross(k_in, s);
+    let p_out = cross(wo, s);
+    let (sxi, syi) = (dot(s, x_in), dot(s, y_in));
+    let (pxi, pyi) = (dot(p_in, x_in), dot(p_in, y_in));
+    let (sxo, syo) = (dot(s, x_out), dot(s, y_out));
+    let (pxo, pyo) = (dot(p_out, x_out), dot(p_out, y_out));
+    [
+        [
+            rs * (sxo * sxi) + rp * (pxo * pxi),
+            rs * (sxo * syi) + rp * (pxo * pyi),
+        ],
+        [
+            rs * (syo * sxi) + rp * (pyo * pxi),
+            rs * (syo * syi) + rp * (pyo * pyi),
+        ],
+    ]
+}
+
+/// Masking term `G(wi, wo) / (cos_i cos_o)` (seed eq. 6 with `P(k) = c/(c + N)`), written
+/// with `Q = P/c = 1/(c + N)` so that it stays finite when one direction is grazing.
+#[inline]
+pub fn masking_over_cosines(mat: &Material, wi: V3, wo: V3) -> f64 {
+    let (ci, co) = (wi[2], wo[2]);
+    let si2 = wi[0] * wi[0] + wi[1] * wi[1];
+    let so2 = wo[0] * wo[0] + wo[1] * wo[1];
+    let (si, so) = (si2.sqrt(), so2.sqrt());
+    let ni = mat.masking_excess(ci, si);
+    let no = mat.masking_excess(co, so);
+    let qi = 1.0 / (ci + ni);
+    let qo = 1.0 / (co + no);
+    let f = if si2 > 0.0 && so2 > 0.0 {
+        let cos_phi = ((wi[0] * wo[0] + wi[1] * wo[1]) / (si * so)).clamp(-1.0, 1.0);
+        mat.correlation.f(cos_phi.acos())
+    } else {
+        // An azimuth is undefined along n, where P = 1 and both forms agree.
+        1.0
+    };
+    let uncorrelated = qi * qo;
+    if f == 0.0 {
+        return uncorrelated;
+    }
+    // min(P_i, P_o) / (c_i c_o)
+    let (pi, po) = (ci * qi, co * qo);
+    let min_term = if pi <= po { qi / co } else { qo / ci };
+    (1.0 - f) * uncorrelated + f * min_term
+}
+
+/// The BRDF Mueller matrix `f(wi, wo)` (1/sr, no cosine factor) of `mat`: the sum of its
+/// enabled terms. `wi`, `wo` are unit vectors with `z >= 0`; a direction on the horizon
+/// (`z == 0`) gives the zero matrix (the cross-section integrand `f cos` vanishes there).
+pub fn eval(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
+    let mut m = [[0.0; 4]; 4];
+    let (ci, co) = (wi[2], wo[2]);
+    if ci <= 0.0 || co <= 0.0 {
+        return m;
+    }
+    let terms = mat.spec.terms;
+    if terms.single {
+        let hsum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+        let h = normalize(hsum);
+        let sin2_h = h[0] * h[0] + h[1] * h[1];
+        let d = mat.spec.distribution.d(h[2], sin2_h);
+        if d > 0.0 {
+            let g = masking_over_cosines(mat, wi, wo);
+            let scale = 0.25 * d * g;
+            let cos_d = dot(wi, h).clamp(0.0, 1.0);
+            let (rs, rp) = fresnel_amplitudes(cos_d, mat.spec.eta);
+            let bases = beam_bases(frame, wi, wo);
+            let j = facet_jones(wi, wo, h, rs, rp, bases);
+            let mf = jones_to_mueller(&j);
+            for (row, frow) in m.iter_mut().zip(mf.iter()) {
+                for (x, y) in row.iter_mut().zip(frow.iter()) {
+                    *x = scale * y;
+                }
+            }
+        }
+    }
+    if terms.multiple || terms.diffuse {
+        let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+        let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
+        if terms.multiple {
+            m[0][0] += mat.multiple(ci, si, co, so);
+        }
+        if terms.diffuse {
+            m[0][0] += mat.diffuse(ci, si, co, so);
+        }
+    }
+    m
+}
+
+/// Mueller reflectance (dimensionless) of the flat interface for incidence `wi`, into the
+/// mirror direction `wo = (-wi.x, -wi.y, wi.z)`: the `m -> inf` limit of the single term,
+/// and what Mitsuba's smooth `conductor` returns as its sample weight.
+pub fn specular(mat: &Material, wi: V3, frame: Frame) -> Mat4 {
+    let wo = [-wi[0], -wi[1], wi[2]];
+    let h = [0.0, 0.0, 1.0];
+    let (rs, rp) = fresnel_amplitudes(wi[2].clamp(0.0, 1.0), mat.spec.eta);
+    let bases = beam_bases(frame, wi, wo);
+    jones_to_mueller(&facet_jones(wi, wo, h, rs, rp, bases))
+}

@@ -1,0 +1,139 @@
+//! Stokes reference frames of the incident and reflected beams (see [`crate::optics`]).
+
+/// A 3-vector.
+pub type V3 = [f64; 3];
+
+#[inline]
+pub fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+#[inline]
+pub fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+#[inline]
+pub fn neg(a: V3) -> V3 {
+    [-a[0], -a[1], -a[2]]
+}
+#[inline]
+pub fn norm(a: V3) -> f64 {
+    dot(a, a).sqrt()
+}
+#[inline]
+pub fn normalize(a: V3) -> V3 {
+    let l = norm(a);
+    [a[0] / l, a[1] / l, a[2] / l]
+}
+
+/// Which transverse bases the returned Mueller matrices refer to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Frame {
+    /// s/p bases of the planes (n, wi) and (n, wo); what a BRDF polarimeter measures.
+    Sp,
+    /// Mitsuba 3's `stokes_basis` of each propagation direction.
+    Mitsuba,
+}
+
+impl std::str::FromStr for Frame {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> crate::Result<Self> {
+        match s {
+            "sp" => Ok(Frame::Sp),
+            "mitsuba" => Ok(Frame::Mitsuba),
+            _ => Err(crate::Error::param(
+                "frame",
+                format!("{s:?}"),
+                "expected \"sp\" or \"mitsuba\"",
+            )),
+        }
+    }
+}
+
+/// Mitsuba 3 / Duff et al. (2017) `coordinate_system(k).0`.
+#[inline]
+pub fn mitsuba_basis(k: V3) -> V3 {
+    let sign = 1.0f64.copysign(k[2]);
+    let a = -1.0 / (sign + k[2]);
+    let b = k[0] * k[1] * a;
+    [(1.0 + sign * k[0] * k[0] * a), sign * b, -sign * k[0]]
+}
+
+/// Squared horizontal length below which a direction counts as "along n" for the
+/// `Sp` frame (its azimuth is then undefined to working precision).
+const ALONG_N2: f64 = 1e-28;
+
+/// Beam bases `(x_in, y_in, x_out, y_out)` for directions `wi`, `wo` (unit, z > 0).
+#[inline]
+pub fn beam_bases(frame: Frame, wi: V3, wo: V3) -> (V3, V3, V3, V3) {
+    let k_in = neg(wi);
+    let k_out = wo;
+    let (x_in, x_out) = match frame {
+        Frame::Mitsuba => (mitsuba_basis(k_in), mitsuba_basis(k_out)),
+        Frame::Sp => {
+            // Azimuth unit vectors of the two planes of incidence.
+            let ri = wi[0] * wi[0] + wi[1] * wi[1];
+            let ro = wo[0] * wo[0] + wo[1] * wo[1];
+            let (ci, si) = if ri > ALONG_N2 {
+                let l = ri.sqrt();
+                (wi[0] / l, wi[1] / l)
+            } else if ro > ALONG_N2 {
+                let l = ro.sqrt();
+                (wo[0] / l, wo[1] / l)
+            } else {
+                (1.0, 0.0)
+            };
+            let (co, so) = if ro > ALONG_N2 {
+                let l = ro.sqrt();
+                (wo[0] / l, wo[1] / l)
+            } else {
+                (ci, si)
+            };
+            // x_in = normalize(k_in x n) = e_phi(phi_i); x_out = normalize(k_out x n) = -e_phi(phi_o).
+            ([-si, ci, 0.0], [so, -co, 0.0])
+        }
+    };
+    (x_in, cross(k_in, x_in), x_out, cross(k_out, x_out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bases_are_orthonormal_and_right_handed() {
+        for frame in [Frame::Sp, Frame::Mitsuba] {
+            for (wi, wo) in [
+                ([0.3, 0.4, 0.866], [-0.5, 0.1, 0.86]),
+                ([0.0, 0.0, 1.0], [0.6, 0.0, 0.8]),
+                ([0.0, 0.0, 1.0], [0.0, 0.0, 1.0]),
+            ] {
+                let (wi, wo) = (normalize(wi), normalize(wo));
+                let (xi, yi, xo, yo) = beam_bases(frame, wi, wo);
+                for (x, y, k) in [(xi, yi, neg(wi)), (xo, yo, wo)] {
+                    assert!((dot(x, x) - 1.0).abs() < 1e-14 && (dot(y, y) - 1.0).abs() < 1e-14);
+                    assert!(
+                        dot(x, k).abs() < 1e-14
+                            && dot(y, k).abs() < 1e-14
+                            && dot(x, y).abs() < 1e-14
+                    );
+                    let c = cross(x, y);
+                    assert!((dot(c, k) - 1.0).abs() < 1e-14);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sp_bases_coincide_for_specular_reflection() {
+        let wi = normalize([0.3, -0.4, 0.5]);
+        let wo = [-wi[0], -wi[1], wi[2]];
+        let (xi, _, xo, _) = beam_bases(Frame::Sp, wi, wo);
+        for a in 0..3 {
+            assert!((xi[a] - xo[a]).abs() < 1e-15);
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Polarimetric quantities derived from Stokes vectors and Mueller matrices.

@@ -1,0 +1,281 @@
+//! Bindings for `crate::brdf`: the `Material` class and batched evaluation.
+
+use crate::brdf::{self as core_brdf, MaterialSpec, Terms};
+use crate::microfacet::{Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
+use crate::optics::frames::{Frame, V3};
+use crate::optics::fresnel::{Eta, C64};
+use numpy::ndarray::{Array1, Array3, ArrayView2};
+use numpy::{IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use rayon::prelude::*;
+use std::str::FromStr;
+use std::sync::Arc;
+
+/// A polarized microfacet material (see the Python docstring in `_core.pyi`).
+#[pyclass(module = "pprender", name = "Material", frozen)]
+pub struct PyMaterial {
+    pub inner: Arc<core_brdf::Material>,
+    name: Option<String>,
+    dist_name: &'static str,
+}
+
+fn parse_eta(eta: C64) -> crate::Result<Eta> {
+    if eta.re.is_nan() || eta.im.is_nan() {
+        return Err(crate::Error::param("eta", eta, "must not be NaN"));
+    }
+    if eta.re == f64::INFINITY && (eta.im == 0.0 || eta.im == f64::INFINITY) {
+        return Ok(Eta::PerfectConductor);
+    }
+    Ok(Eta::Complex(eta))
+}
+
+#[pymethods]
+impl PyMaterial {
+    #[new]
+    #[pyo3(signature = (distribution="blinn_phong", *, m=None, alpha=None, eta=C64::new(1.5, 0.0),
+        shadowing="aps", correlation=None, smith_g1="exact", masking="table",
+        terms=vec!["single".to_string(), "multiple".to_string()], diffuse_albedo=0.0, name=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        distribution: &str,
+        m: Option<f64>,
+        alpha: Option<f64>,
+        eta: C64,
+        shadowing: &str,
+        correlation: Option<&str>,
+        smith_g1: &str,
+        masking: &str,
+        terms: Vec<String>,
+        diffuse_albedo: f64,
+        name: Option<String>,
+    ) -> PyResult<Self> {
+        let dist = Distribution::new(distribution, m, alpha)?;
+        let spec = MaterialSpec {
+            distribution: dist,
+            eta: parse_eta(eta)?,
+            shadowing: Shadowing::from_str(shadowing)?,
+            correlation: correlation.map(Correlation::from_str).transpose()?,
+            smith_g1: SmithG1::from_str(smith_g1)?,
+            masking: MaskingEval::from_str(masking)?,
+            terms: Terms::parse(&terms)?,
+            diffuse_albedo,
+        };
+        let inner = py.detach(|| core_brdf::Material::new(spec))?;
+        let dist_name = match dist {
+            Distribution::BlinnPhong { .. } => "blinn_phong",
+            Distribution::Beckmann { .. } => "beckmann",
+            Distribution::Ggx { .. } => "ggx",
+        };
+        Ok(PyMaterial { inner: Arc::new(inner), name, dist_name })
+    }
+
+    #[getter]
+    fn distribution(&self) -> &'static str {
+        self.dist_name
+    }
+    /// Blinn-Phong exponent (None for Beckmann/GGX).
+    #[getter]
+    fn m(&self) -> Option<f64> {
+        match self.inner.spec.distribution {
+            Distribution::BlinnPhong { m } => Some(m),
+            _ => None,
+        }
+    }
+    /// Beckmann/GGX roughness (None for Blinn-Phong).
+    #[getter]
+    fn alpha(&self) -> Option<f64> {
+        match self.inner.spec.distribution {
+            Distribution::Beckmann { alpha } | Distribution::Ggx { alpha } => Some(alpha),
+            _ => None,
+        }
+    }
+    #[getter]
+    fn eta(&self) -> C64 {
+        match self.inner.spec.eta {
+            Eta::Complex(e) => e,
+            Eta::PerfectConductor => C64::new(f64::INFINITY, 0.0),
+        }
+    }
+    #[getter]
+    fn shadowing(&self) -> &'static str {
+        match self.inner.spec.shadowing {
+            Shadowing::Aps => "aps",
+            Shadowing::Smith => "smith",
+            Shadowing::None => "none",
+        }
+    }
+    #[getter]
+    fn correlation(&self) -> &'static str {
+        match self.inner.correlation {
+            Correlation::Seed => "seed",
+            Correlation::Aps => "aps",
+            Correlation::None => "none",
+        }
+    }
+    #[getter]
+    fn smith_g1(&self) -> &'static str {
+        match self.inner.spec.smith_g1 {
+            SmithG1::Exact => "exact",
+            SmithG1::Walter => "walter",
+        }
+    }
+    #[getter]
+    fn masking(&self) -> &'static str {
+        match self.inner.spec.masking {
+            MaskingEval::Exact => "exact",
+            MaskingEval::Table => "table",
+            MaskingEval::Seed => "seed",
+        }
+    }
+    #[getter]
+    fn terms(&self) -> Vec<&'static str> {
+        self.inner.spec.terms.names()
+    }
+    #[getter]
+    fn diffuse_albedo(&self) -> f64 {
+        self.inner.spec.diffuse_albedo
+    }
+    #[getter]
+    fn name(&self) -> Option<String> {
+        self.name.clone()
+    }
+    /// Hemispherical average E_avg of the white (F = 1) single-bounce albedo (None if the
+    /// material has no multiple/diffuse term and so no albedo table).
+    #[getter]
+    fn e_avg(&self) -> Option<f64> {
+        self.inner.e_white.as_ref().map(|t| t.e_avg)
+    }
+    /// Kulla-Conty Fresnel factor of the multiple term.
+    #[getter]
+    fn f_ms(&self) -> f64 {
+        self.inner.f_ms
+    }
+
+    fn __repr__(&self) -> String {
+        let rough = match self.inner.spec.distribution {
+            Distribution::BlinnPhong { m } => format!("m={m}"),
+            Distribution::Beckmann { alpha } | Distribution::Ggx { alpha } => format!("alpha={alpha}"),
+        };
+        let eta = match self.inner.spec.eta {
+            Eta::Complex(e) => format!("{}{:+}j", e.re, e.im),
+            Eta::PerfectConductor => "inf".into(),
+        };
+        let name = self.name.as_ref().map(|n| format!(", name={n:?}")).unwrap_or_default();
+        format!(
+            "Material({:?}, {rough}, eta={eta}, shadowing={:?}, terms={:?}{})",
+            self.dist_name,
+            self.shadowing(),
+            self.terms(),
+            name
+        )
+    }
+}
+
+/// Validate and normalize an (N, 3) array of directions in the upper hemisphere.
+pub fn directions(a: ArrayView2<'_, f64>, name: &'static str) -> crate::Result<Vec<V3>> {
+    if a.ncols() != 3 {
+        return Err(crate::Error::Shape(format!("{name} must have shape (..., 3), got last axis {}", a.ncols())));
+    }
+    let mut out = Vec::with_capacity(a.nrows());
+    for (i, row) in a.rows().into_iter().enumerate() {
+        let v = [row[0], row[1], row[2]];
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(crate::Error::InvalidDirection { name, reason: format!("element {i} = {v:?} is not finite") });
+        }
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if (l - 1.0).abs() > 1e-6 {
+            return Err(crate::Error::InvalidDirection {
+                name,
+                reason: format!("element {i} = {v:?} has length {l}; directions must be unit vectors (|w| - 1 within 1e-6)"),
+            });
+        }
+        if v[2] < 0.0 {
+            return Err(crate::Error::InvalidDirection {
+                name,
+                reason: format!("element {i} = {v:?} is below the horizon (z < 0); directions point away from the surface, z >= 0"),
+            });
+        }
+        out.push([v[0] / l, v[1] / l, v[2] / l]);
+    }
+    Ok(out)
+}
+
+fn to_array3(n: usize, data: Vec<[[f64; 4]; 4]>) -> Array3<f64> {
+    let flat: Vec<f64> = data.into_iter().flat_map(|m| m.into_iter().flatten()).collect();
+    Array3::from_shape_vec((n, 4, 4), flat).expect("shape")
+}
+
+/// Batches below this run on one thread (rayon's overhead dominates).
+const PAR_MIN: usize = 2048;
+
+#[pyfunction]
+#[pyo3(name = "brdf")]
+fn brdf_eval<'py>(
+    py: Python<'py>,
+    material: &PyMaterial,
+    wi: PyReadonlyArray2<'py, f64>,
+    wo: PyReadonlyArray2<'py, f64>,
+    frame: &str,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let frame = Frame::from_str(frame)?;
+    let wi = directions(wi.as_array(), "wi")?;
+    let wo = directions(wo.as_array(), "wo")?;
+    if wi.len() != wo.len() {
+        return Err(crate::Error::Shape(format!("wi and wo have {} and {} directions", wi.len(), wo.len())).into());
+    }
+    let mat = material.inner.clone();
+    let n = wi.len();
+    let out = py.detach(move || {
+        let f = |(a, b): (&V3, &V3)| core_brdf::eval(&mat, *a, *b, frame);
+        let v: Vec<_> = if n >= PAR_MIN {
+            wi.par_iter().zip(wo.par_iter()).map(f).collect()
+        } else {
+            wi.iter().zip(wo.iter()).map(f).collect()
+        };
+        to_array3(n, v)
+    });
+    Ok(out.into_pyarray(py))
+}
+
+#[pyfunction]
+fn specular<'py>(
+    py: Python<'py>,
+    material: &PyMaterial,
+    wi: PyReadonlyArray2<'py, f64>,
+    frame: &str,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let frame = Frame::from_str(frame)?;
+    let wi = directions(wi.as_array(), "wi")?;
+    let mat = material.inner.clone();
+    let n = wi.len();
+    let v: Vec<_> = wi.iter().map(|w| core_brdf::specular(&mat, *w, frame)).collect();
+    Ok(to_array3(n, v).into_pyarray(py))
+}
+
+#[pyfunction]
+fn albedo<'py>(
+    py: Python<'py>,
+    material: &PyMaterial,
+    cos_theta_i: PyReadonlyArray1<'py, f64>,
+    order: usize,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    if !(8..=4096).contains(&order) {
+        return Err(crate::Error::param("order", order, "quadrature order must be in [8, 4096]").into());
+    }
+    let c: Vec<f64> = cos_theta_i.as_array().to_vec();
+    if let Some(bad) = c.iter().find(|x| !(x.is_finite() && (0.0..=1.0).contains(*x))) {
+        return Err(crate::Error::param("wi", bad, "cos(theta_i) = wi.z must be in [0, 1]").into());
+    }
+    let mat = material.inner.clone();
+    let out = py.detach(move || c.par_iter().map(|&x| core_brdf::albedo(&mat, x, order)).collect::<Vec<f64>>());
+    Ok(Array1::from(out).into_pyarray(py))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyMaterial>()?;
+    m.add_function(wrap_pyfunction!(brdf_eval, m)?)?;
+    m.add_function(wrap_pyfunction!(specular, m)?)?;
+    m.add_function(wrap_pyfunction!(albedo, m)?)?;
+    Ok(())
+}

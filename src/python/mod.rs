@@ -1,0 +1,30 @@
+//! The PyO3 binding layer (`pprender._core`): converts arrays and errors, nothing else.
+
+use pyo3::prelude::*;
+
+pub mod brdf;
+mod polarimetry;
+mod seed;
+
+pyo3::create_exception!(
+    pprender,
+    Error,
+    pyo3::exceptions::PyValueError,
+    "Invalid input to pprender: the message names the parameter and its allowed range."
+);
+
+impl From<crate::Error> for PyErr {
+    fn from(e: crate::Error) -> PyErr {
+        Error::new_err(e.to_string())
+    }
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("Error", m.py().get_type::<Error>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    brdf::register(m)?;
+    polarimetry::register(m)?;
+    seed::register(m)?;
+    Ok(())
+}
