@@ -108,8 +108,7 @@ impl Distribution {
                 if m == 0.0 {
                     return 1.0 / PI;
                 }
-                // cos^m = exp(m/2 ln(1 - sin^2)), accurate for tiny sin^2.
-                (m + 2.0) / (2.0 * PI) * (0.5 * m * (-sin2_h).ln_1p()).exp()
+                (m + 2.0) / (2.0 * PI) * (m * ln_cos(cos_h, sin2_h)).exp()
             }
             Distribution::Beckmann { alpha } => {
                 let c2 = cos_h * cos_h;
@@ -205,7 +204,7 @@ impl Distribution {
             return 0.0;
         }
         match *self {
-            Distribution::BlinnPhong { m } => (0.25 * (m + 2.0) * (-sin2_h).ln_1p()).exp(),
+            Distribution::BlinnPhong { m } => (0.5 * (m + 2.0) * ln_cos(cos_h, sin2_h)).exp(),
             Distribution::Beckmann { alpha } => (-0.5 * sin2_h / (cos_h * cos_h * alpha * alpha)).exp(),
             Distribution::Ggx { alpha } => {
                 let a2 = alpha * alpha;
@@ -226,6 +225,16 @@ impl Distribution {
             2.0 * s / c
         });
         1.0 / inv
+    }
+}
+
+/// `ln cos(theta)` from whichever of `cos`, `sin^2` carries the precision.
+#[inline]
+fn ln_cos(cos_t: f64, sin2_t: f64) -> f64 {
+    if sin2_t < 0.5 {
+        0.5 * (-sin2_t).ln_1p()
+    } else {
+        cos_t.ln()
     }
 }
 

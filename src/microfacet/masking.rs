@@ -273,9 +273,9 @@ impl ZTable {
         let t = x - i as f64;
         let p1 = v[i];
         let p2 = v[i + 1];
-        // End slopes by one-sided differences keep the interpolant inside the data range.
-        let p0 = if i > 0 { v[i - 1] } else { 2.0 * p1 - p2 };
-        let p3 = if i + 2 <= n { v[i + 2] } else { 2.0 * p2 - p1 };
+        // Ghost nodes by quadratic extrapolation keep third order in the end intervals.
+        let p0 = if i > 0 { v[i - 1] } else { 3.0 * p1 - 3.0 * p2 + v[(i + 2).min(n)] };
+        let p3 = if i + 2 <= n { v[i + 2] } else { 3.0 * p2 - 3.0 * p1 + v[i.saturating_sub(1)] };
         let t2 = t * t;
         let t3 = t2 * t;
         0.5 * ((2.0 * p1)
@@ -387,16 +387,18 @@ mod tests {
             Distribution::Beckmann { alpha: 0.1 },
             Distribution::Ggx { alpha: 0.5 },
         ] {
-            let table = ZTable::build(dist.scale(), TABLE_NODES, |t| aps_p(&dist, t));
+            // The BRDF tabulates N_D and forms P = c / (c + N_D).
+            let table = ZTable::build(dist.scale(), TABLE_NODES, |t| aps_excess(&dist, t));
             let mut worst: f64 = 0.0;
-            for i in 0..997 {
-                let z = (i as f64 + 0.37) / 997.0;
+            for i in 0..4999 {
+                let z = (i as f64 + 0.37) / 4999.0;
                 let th = ZTable::theta_of_z(dist.scale(), z);
-                let err = (table.eval(th.cos(), th.sin()) - aps_p(&dist, th)).abs();
-                worst = worst.max(err);
+                let c = th.cos();
+                let p_tab = c / (c + table.eval(c, th.sin()).max(0.0));
+                worst = worst.max((p_tab - aps_p(&dist, th)).abs());
             }
-            // measured: 1.4e-7 (m = 0), below 1e-8 for the others
-            assert!(worst < 3e-7, "{dist:?}: table error {worst}");
+            // measured with 512 nodes: 2.4e-7 (m = 0) and below 1e-7 for the others
+            assert!(worst < 5e-7, "{dist:?}: table error {worst}");
         }
     }
 

@@ -22,20 +22,29 @@ impl Eta {
 
 /// Complex amplitudes `(rs, rp)` for reflection at incidence cosine `cos_theta_i` in [0, 1].
 ///
-/// Stable over the whole range: `sin^2` is computed as `(1 - c)(1 + c)`, the principal
-/// square root keeps `Im w >= 0` for `k >= 0`, and `|rs|, |rp| <= 1` for passive media.
+/// Stable over the whole range: the numerators are rewritten without cancellation using
+/// `c^2 + sin^2 = 1`,
+/// `rs = (1 - eta^2) / (c + w)^2`, `rp = (eta^2 - 1)(c^2 (eta^2 + 1) - 1) / (eta^2 c + w)^2`,
+/// with `eta^2 - 1 = (eta - 1)(eta + 1)`, so `eta` near 1 keeps full relative accuracy;
+/// the principal square root keeps `Im w >= 0` for `k >= 0`. `eta = 1` at exact grazing
+/// (0/0) returns 0, the value at every other angle.
 #[inline]
 pub fn fresnel_amplitudes(cos_theta_i: f64, eta: Eta) -> (C64, C64) {
     match eta {
         Eta::PerfectConductor => (C64::new(-1.0, 0.0), C64::new(1.0, 0.0)),
         Eta::Complex(eta) => {
             let c = cos_theta_i.clamp(0.0, 1.0);
-            let sin2 = (1.0 - c) * (1.0 + c);
             let eta2 = eta * eta;
-            let w = (eta2 - sin2).sqrt();
-            let rs = (c - w) / (c + w);
-            let eta2c = eta2 * c;
-            let rp = (eta2c - w) / (eta2c + w);
+            let eta2m1 = (eta - 1.0) * (eta + 1.0);
+            // eta^2 - sin^2 = (eta^2 - 1) + c^2
+            let w = (eta2m1 + c * c).sqrt();
+            let ds = c + w;
+            let dp = eta2 * c + w;
+            if ds == C64::new(0.0, 0.0) || dp == C64::new(0.0, 0.0) {
+                return (C64::new(0.0, 0.0), C64::new(0.0, 0.0));
+            }
+            let rs = -eta2m1 / (ds * ds);
+            let rp = eta2m1 * (c * c * (eta2 + 1.0) - 1.0) / (dp * dp);
             (rs, rp)
         }
     }
@@ -78,6 +87,29 @@ mod tests {
             assert!((rs.norm_sqr() - r).abs() < 1e-14 * r.max(1e-300) + 1e-300);
             assert!((rp + rs).norm() < 1e-14, "rp = -rs at normal incidence");
         }
+    }
+
+    #[test]
+    fn matches_textbook_form_away_from_cancellation() {
+        for (n, k) in [(1.5, 0.0), (0.2, 3.4), (2.5, 0.5), (1e3, 1e3)] {
+            let eta = C64::new(n, k);
+            for c in [1.0, 0.7, 0.3, 0.01] {
+                let w = (eta * eta - (1.0 - c * c)).sqrt();
+                let rs0 = (c - w) / (c + w);
+                let rp0 = (eta * eta * c - w) / (eta * eta * c + w);
+                let (rs, rp) = fresnel_amplitudes(c, Eta::Complex(eta));
+                assert!((rs - rs0).norm() < 1e-13 && (rp - rp0).norm() < 1e-13);
+            }
+        }
+    }
+
+    #[test]
+    fn eta_near_one_keeps_relative_accuracy() {
+        // R(0) = ((n-1)/(n+1))^2 to full precision for n = 1 + 1e-6.
+        let n = 1.0 + 1e-6;
+        let (rs, _) = fresnel_amplitudes(1.0, Eta::new(n, 0.0));
+        let want = (n - 1.0) / (n + 1.0);
+        assert!((rs.re + want).abs() < 1e-14 * want);
     }
 
     #[test]
