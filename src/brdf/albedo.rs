@@ -93,3 +93,57 @@ pub fn albedo(mat: &Material, cos_i: f64, n: usize) -> f64 {
     let (ms, d) = mat.lambertian_albedo(ci, si);
     single + ms + d
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::{MaterialSpec, Terms};
+    use crate::microfacet::{Distribution, MaskingEval, Shadowing, SmithG1};
+    use crate::optics::fresnel::Eta;
+
+    fn furnace(distribution: Distribution, shadowing: Shadowing) -> Material {
+        Material::new(MaterialSpec {
+            distribution,
+            eta: Eta::PerfectConductor,
+            shadowing,
+            correlation: None,
+            smith_g1: SmithG1::Exact,
+            masking: MaskingEval::Table,
+            terms: Terms { single: true, multiple: true, diffuse: false },
+            diffuse_albedo: 0.0,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn white_furnace() {
+        // F = 1: single (quadrature, order 256) + multiple (analytic, tables) = 1.
+        for (d, sh) in [
+            (Distribution::BlinnPhong { m: 0.0 }, Shadowing::Aps),
+            (Distribution::BlinnPhong { m: 1e3 }, Shadowing::Aps),
+            (Distribution::Ggx { alpha: 0.5 }, Shadowing::Smith),
+        ] {
+            let mat = furnace(d, sh);
+            for deg in [0.0f64, 45.0, 80.0, 89.9] {
+                let a = albedo(&mat, deg.to_radians().cos(), 256);
+                assert!((a - 1.0).abs() < 1e-4, "{d:?} {deg}: {a}");
+            }
+        }
+    }
+
+    #[test]
+    fn reciprocity_of_the_scalar_part() {
+        let mat = furnace(Distribution::Beckmann { alpha: 0.4 }, Shadowing::Aps);
+        let wi = crate::optics::frames::normalize([0.3, -0.2, 0.7]);
+        let wo = crate::optics::frames::normalize([-0.6, 0.1, 0.3]);
+        let f = crate::optics::frames::Frame::Sp;
+        let a = crate::brdf::eval(&mat, wi, wo, f);
+        let b = crate::brdf::eval(&mat, wo, wi, f);
+        let r = crate::optics::mueller::reciprocal(&a);
+        for i in 0..4 {
+            for j in 0..4 {
+                assert!((b[i][j] - r[i][j]).abs() < 1e-12 * a[0][0]);
+            }
+        }
+    }
+}

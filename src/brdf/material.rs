@@ -212,13 +212,30 @@ impl Material {
     /// for a direction with `cos theta = c`, `sin theta = s` (APS: `N_D`; Smith: `c Lambda`).
     #[inline]
     pub fn masking_excess(&self, c: f64, s: f64) -> f64 {
+        self.masking_excess_z(c, s, self.z_of(c, s))
+    }
+
+    /// The table coordinate `z` of a direction (shared by all per-material tables).
+    #[inline]
+    pub fn z_of(&self, c: f64, s: f64) -> f64 {
+        let den = self.spec.distribution.scale() * s + c;
+        if den <= 0.0 {
+            0.0
+        } else {
+            (c / den).clamp(0.0, 1.0)
+        }
+    }
+
+    /// [`Self::masking_excess`] with the table coordinate already computed.
+    #[inline]
+    pub fn masking_excess_z(&self, c: f64, s: f64, z: f64) -> f64 {
         match self.spec.shadowing {
             Shadowing::None => 0.0,
             Shadowing::Smith => {
                 c * masking::smith_lambda(&self.spec.distribution, self.spec.smith_g1, c, s * s)
             }
             Shadowing::Aps => match self.spec.masking {
-                MaskingEval::Table => self.n_table.as_ref().unwrap().eval(c, s).max(0.0),
+                MaskingEval::Table => self.n_table.as_ref().unwrap().eval_z(z).max(0.0),
                 MaskingEval::Exact => masking::aps_excess(&self.spec.distribution, s.atan2(c)),
                 MaskingEval::Seed => {
                     let m = match self.spec.distribution {
@@ -244,26 +261,38 @@ impl Material {
     /// Multiple-scattering value `f_ms(wi, wo)` (1/sr) from cosines/sines of both directions.
     #[inline]
     pub fn multiple(&self, ci: f64, si: f64, co: f64, so: f64) -> f64 {
+        self.multiple_z(self.z_of(ci, si), self.z_of(co, so))
+    }
+
+    /// [`Self::multiple`] from the table coordinates of both directions.
+    #[inline]
+    pub fn multiple_z(&self, zi: f64, zo: f64) -> f64 {
         let t = self.e_white.as_ref().expect("multiple term enabled");
         let denom = std::f64::consts::PI * (1.0 - t.e_avg);
         if denom <= 1e-14 {
             return 0.0;
         }
-        let a = (1.0 - t.e.eval(ci, si)).max(0.0);
-        let b = (1.0 - t.e.eval(co, so)).max(0.0);
+        let a = (1.0 - t.e.eval_z(zi)).max(0.0);
+        let b = (1.0 - t.e.eval_z(zo)).max(0.0);
         self.f_ms * a * b / denom
     }
 
     /// Diffuse (paint) value (1/sr).
     #[inline]
     pub fn diffuse(&self, ci: f64, si: f64, co: f64, so: f64) -> f64 {
+        self.diffuse_z(self.z_of(ci, si), self.z_of(co, so))
+    }
+
+    /// [`Self::diffuse`] from the table coordinates of both directions.
+    #[inline]
+    pub fn diffuse_z(&self, zi: f64, zo: f64) -> f64 {
         let t = self.e_spec.as_ref().expect("diffuse term enabled");
         let denom = std::f64::consts::PI * (1.0 - t.e_avg);
         if denom <= 1e-14 {
             return 0.0;
         }
-        let a = (1.0 - t.e.eval(ci, si)).max(0.0);
-        let b = (1.0 - t.e.eval(co, so)).max(0.0);
+        let a = (1.0 - t.e.eval_z(zi)).max(0.0);
+        let b = (1.0 - t.e.eval_z(zo)).max(0.0);
         self.spec.diffuse_albedo * a * b / denom
     }
 

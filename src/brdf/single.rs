@@ -41,17 +41,25 @@ fn facet_jones(wi: V3, wo: V3, h: V3, rs: C64, rp: C64, bases: (V3, V3, V3, V3))
 /// with `Q = P/c = 1/(c + N)` so that it stays finite when one direction is grazing.
 #[inline]
 pub fn masking_over_cosines(mat: &Material, wi: V3, wo: V3) -> f64 {
+    let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+    let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
+    masking_over_cosines_z(mat, wi, wo, si, so, mat.z_of(wi[2], si), mat.z_of(wo[2], so))
+}
+
+/// [`masking_over_cosines`] with the horizontal lengths and table coordinates given.
+#[inline]
+fn masking_over_cosines_z(mat: &Material, wi: V3, wo: V3, si: f64, so: f64, zi: f64, zo: f64) -> f64 {
     let (ci, co) = (wi[2], wo[2]);
-    let si2 = wi[0] * wi[0] + wi[1] * wi[1];
-    let so2 = wo[0] * wo[0] + wo[1] * wo[1];
-    let (si, so) = (si2.sqrt(), so2.sqrt());
-    let ni = mat.masking_excess(ci, si);
-    let no = mat.masking_excess(co, so);
+    let (si2, so2) = (si * si, so * so);
+    let ni = mat.masking_excess_z(ci, si, zi);
+    let no = mat.masking_excess_z(co, so, zo);
     let qi = 1.0 / (ci + ni);
     let qo = 1.0 / (co + no);
-    let f = if si2 > 0.0 && so2 > 0.0 {
+    let f = if mat.correlation == crate::microfacet::Correlation::None {
+        0.0
+    } else if si2 > 0.0 && so2 > 0.0 {
         let cos_phi = ((wi[0] * wo[0] + wi[1] * wo[1]) / (si * so)).clamp(-1.0, 1.0);
-        mat.correlation.f(cos_phi.acos())
+        mat.correlation.f_from_cos(cos_phi)
     } else {
         // An azimuth is undefined along n, where P = 1 and both forms agree.
         1.0
@@ -76,13 +84,16 @@ pub fn eval(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
         return m;
     }
     let terms = mat.spec.terms;
+    let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+    let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
+    let (zi, zo) = (mat.z_of(ci, si), mat.z_of(co, so));
     if terms.single {
         let hsum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
         let h = normalize(hsum);
         let sin2_h = h[0] * h[0] + h[1] * h[1];
         let d = mat.spec.distribution.d(h[2], sin2_h);
         if d > 0.0 {
-            let g = masking_over_cosines(mat, wi, wo);
+            let g = masking_over_cosines_z(mat, wi, wo, si, so, zi, zo);
             let scale = 0.25 * d * g;
             let cos_d = dot(wi, h).clamp(0.0, 1.0);
             let (rs, rp) = fresnel_amplitudes(cos_d, mat.spec.eta);
@@ -96,15 +107,11 @@ pub fn eval(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
             }
         }
     }
-    if terms.multiple || terms.diffuse {
-        let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
-        let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
-        if terms.multiple {
-            m[0][0] += mat.multiple(ci, si, co, so);
-        }
-        if terms.diffuse {
-            m[0][0] += mat.diffuse(ci, si, co, so);
-        }
+    if terms.multiple {
+        m[0][0] += mat.multiple_z(zi, zo);
+    }
+    if terms.diffuse {
+        m[0][0] += mat.diffuse_z(zi, zo);
     }
     m
 }

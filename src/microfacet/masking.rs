@@ -85,6 +85,17 @@ parse_enum!(MaskingEval, "masking", "exact" => MaskingEval::Exact, "table" => Ma
 parse_enum!(SmithG1, "smith_g1", "exact" => SmithG1::Exact, "walter" => SmithG1::Walter);
 
 impl Correlation {
+    /// `f(phi)` from `cos(phi)`, `phi` in [0, pi] (no `acos` for the seed's form:
+    /// `cos(phi/2) = sqrt((1 + cos phi)/2)`).
+    #[inline]
+    pub fn f_from_cos(&self, cos_phi: f64) -> f64 {
+        match self {
+            Correlation::Seed => (0.5 * (1.0 + cos_phi)).max(0.0).sqrt(),
+            Correlation::Aps => self.f(cos_phi.clamp(-1.0, 1.0).acos()),
+            Correlation::None => 0.0,
+        }
+    }
+
     /// `f(phi)` for `phi` in [0, pi].
     #[inline]
     pub fn f(&self, phi: f64) -> f64 {
@@ -364,6 +375,15 @@ mod tests {
             "{}",
             series / direct - 1.0
         );
+    }
+
+    #[test]
+    fn correlation_from_cos_matches_angle_form() {
+        for c in [Correlation::Seed, Correlation::Aps, Correlation::None] {
+            for phi in [0.0, 0.3, 1.0, 2.0, 3.0, PI] {
+                assert!((c.f_from_cos(f64::cos(phi)) - c.f(phi)).abs() < 1e-7, "{c:?} {phi}");
+            }
+        }
     }
 
     #[test]

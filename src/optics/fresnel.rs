@@ -37,7 +37,7 @@ pub fn fresnel_amplitudes(cos_theta_i: f64, eta: Eta) -> (C64, C64) {
             let eta2 = eta * eta;
             let eta2m1 = (eta - 1.0) * (eta + 1.0);
             // eta^2 - sin^2 = (eta^2 - 1) + c^2
-            let w = (eta2m1 + c * c).sqrt();
+            let w = csqrt(eta2m1 + c * c);
             let ds = c + w;
             let dp = eta2 * c + w;
             if ds == C64::new(0.0, 0.0) || dp == C64::new(0.0, 0.0) {
@@ -47,6 +47,25 @@ pub fn fresnel_amplitudes(cos_theta_i: f64, eta: Eta) -> (C64, C64) {
             let rp = eta2m1 * (c * c * (eta2 + 1.0) - 1.0) / (dp * dp);
             (rs, rp)
         }
+    }
+}
+
+/// Principal square root without trigonometry (Kahan's algebraic form): for
+/// `z = a + ib`, `t = sqrt((|z| + |a|)/2)`; `sqrt z = (t, b/(2t))` for `a >= 0`, else
+/// `(|b|/(2t), sign(b) t)`. `|z|` by `hypot` only when the squares could overflow.
+#[inline]
+pub fn csqrt(z: C64) -> C64 {
+    let (a, b) = (z.re, z.im);
+    if a == 0.0 && b == 0.0 {
+        return C64::new(0.0, b);
+    }
+    let aa = a.abs();
+    let r = if aa < 1e150 && b.abs() < 1e150 { (a * a + b * b).sqrt() } else { a.hypot(b) };
+    let t = (0.5 * (r + aa)).sqrt();
+    if a >= 0.0 {
+        C64::new(t, b / (2.0 * t))
+    } else {
+        C64::new(b.abs() / (2.0 * t), t.copysign(b))
     }
 }
 
@@ -100,6 +119,16 @@ mod tests {
                 let (rs, rp) = fresnel_amplitudes(c, Eta::Complex(eta));
                 assert!((rs - rs0).norm() < 1e-13 && (rp - rp0).norm() < 1e-13);
             }
+        }
+    }
+
+    #[test]
+    fn csqrt_matches_principal_branch() {
+        for (a, b) in [(1.0, 0.0), (-1.0, 0.0), (-1.0, 1e-300), (-2.39, 6.0), (3.0, -4.0), (-1e-8, 2e6), (1e200, 1e200), (0.0, 1.0)] {
+            let z = C64::new(a, b);
+            let got = csqrt(z);
+            let want = z.sqrt();
+            assert!((got - want).norm() <= 1e-15 * want.norm(), "{z}: {got} vs {want}");
         }
     }
 

@@ -227,13 +227,21 @@ fn brdf_eval<'py>(
     let mat = material.inner.clone();
     let n = wi.len();
     let out = py.detach(move || {
-        let f = |(a, b): (&V3, &V3)| core_brdf::eval(&mat, *a, *b, frame);
-        let v: Vec<_> = if n >= PAR_MIN {
-            wi.par_iter().zip(wo.par_iter()).map(f).collect()
-        } else {
-            wi.iter().zip(wo.iter()).map(f).collect()
+        // Write straight into the output buffer (no intermediate copies).
+        let mut out = Array3::<f64>::zeros((n, 4, 4));
+        let buf = out.as_slice_mut().expect("standard layout");
+        let f = |(dst, (a, b)): (&mut [f64], (&V3, &V3))| {
+            let m = core_brdf::eval(&mat, *a, *b, frame);
+            for (d, s) in dst.iter_mut().zip(m.iter().flatten()) {
+                *d = *s;
+            }
         };
-        to_array3(n, v)
+        if n >= PAR_MIN {
+            buf.par_chunks_mut(16).zip(wi.par_iter().zip(wo.par_iter())).for_each(f);
+        } else {
+            buf.chunks_mut(16).zip(wi.iter().zip(wo.iter())).for_each(f);
+        }
+        out
     });
     Ok(out.into_pyarray(py))
 }
