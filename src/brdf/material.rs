@@ -2,7 +2,7 @@
 //! tables derived from them.
 
 use crate::microfacet::masking::{self, ZTable, TABLE_NODES};
-use crate::microfacet::{Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
+use crate::microfacet::{seed, Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
 use crate::optics::fresnel::{average_reflectance, Eta};
 use crate::{Error, Result};
 
@@ -237,18 +237,10 @@ impl Material {
             Shadowing::Aps => match self.spec.masking {
                 MaskingEval::Table => self.n_table.as_ref().unwrap().eval_z(z).max(0.0),
                 MaskingEval::Exact => masking::aps_excess(&self.spec.distribution, s.atan2(c)),
-                MaskingEval::Seed => {
-                    let m = match self.spec.distribution {
-                        Distribution::BlinnPhong { m } => m,
-                        _ => unreachable!("checked in Material::new"),
-                    };
-                    let p = seed_p(m, s.atan2(c));
-                    if p > 0.0 {
-                        c * (1.0 / p - 1.0)
-                    } else {
-                        f64::MAX
-                    }
-                }
+                MaskingEval::Seed => match self.spec.distribution {
+                    Distribution::BlinnPhong { m } => seed::seed_aps_excess_cos(m, c),
+                    _ => unreachable!("checked in Material::new"),
+                },
             },
         }
     }
@@ -344,7 +336,3 @@ fn average_over_cosine(t: &ZTable) -> f64 {
     total
 }
 
-// TEMPORARY until microfacet::seed lands (lead's note): the exact P.
-fn seed_p(m: f64, theta: f64) -> f64 {
-    masking::aps_p(&Distribution::BlinnPhong { m }, theta)
-}

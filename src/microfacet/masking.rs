@@ -174,12 +174,22 @@ pub fn aps_excess(dist: &Distribution, theta_k: f64) -> f64 {
         let part = if first {
             // t = t0 + s^2 on the first panel removes the (t - t0)^{3/2} endpoint.
             let smax = hi.sqrt();
-            crate::quad::integrate(24, 0.0, smax, |s| {
+            crate::quad::integrate(QN, 0.0, smax, |s| {
                 let dt = s * s;
                 2.0 * s * integrand(t0 + dt, dt)
             })
+        } else if hi >= span {
+            // Last panel, ending at t = pi/2 where cos^m t ~ (pi/2 - t)^m is not smooth for
+            // non-integer m: t = pi/2 - w y^4 turns it into y^(4m+3) dy.
+            let w = span - lo;
+            crate::quad::integrate(QN, 0.0, 1.0, |y| {
+                let y2 = y * y;
+                let v = w * y2 * y2; // pi/2 - t
+                let dt = span - v;
+                4.0 * w * y2 * y * integrand(t0 + dt, dt)
+            })
         } else {
-            crate::quad::integrate(24, lo, hi, |dt| integrand(t0 + dt, dt))
+            crate::quad::integrate(QN, lo, hi, |dt| integrand(t0 + dt, dt))
         };
         total += part;
         if !first && part <= 1e-17 * total.max(1e-300) {
@@ -303,6 +313,9 @@ impl ZTable {
 
 /// Default node count of the per-material masking tables.
 pub const TABLE_NODES: usize = 512;
+/// Gauss-Legendre points per panel of the `N_D` quadrature. Measured: 64 gives relative
+/// errors below 1e-11 at grazing for non-integer m down to 0.1 (24 gave 1e-7 at m = 0.5).
+const QN: usize = 64;
 
 #[cfg(test)]
 mod tests {
@@ -351,6 +364,19 @@ mod tests {
                     "{dist:?} {theta}: {exact} vs {brute}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn grazing_value_for_non_integer_small_m() {
+        // At theta_k = pi/2: <h.k>+ = (m+1)/pi int cos^m t sin^2 t ... closed form
+        // <h.k>+(pi/2) = A(m+2)/pi ... checked against the Wallis integral:
+        // int rho max(0, h.x) d omega = (m+1)/(2 pi) int cos^m sin^2 dt * 2 = A(m+2)(m+1)/pi / (m+1)
+        for m in [0.1f64, 0.3, 0.5, 0.9, 1.5, 2.5] {
+            let d = Distribution::BlinnPhong { m };
+            let got = hk_plus(&d, FRAC_PI_2);
+            let want = super::super::seed::wallis(m + 2.0) / PI;
+            assert!((got / want - 1.0).abs() < 1e-11, "m={m}: {got} vs {want}");
         }
     }
 
