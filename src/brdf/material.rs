@@ -169,25 +169,40 @@ impl Material {
             e_spec: None,
         };
         let dist = mat.spec.distribution;
-        if mat.spec.shadowing == Shadowing::Aps && mat.spec.masking == MaskingEval::Table {
+        let needs_albedo = mat.spec.terms.multiple || mat.spec.terms.diffuse;
+        let exact = mat.spec.masking == MaskingEval::Exact;
+        if mat.spec.shadowing == Shadowing::Aps
+            && (mat.spec.masking == MaskingEval::Table || (exact && needs_albedo))
+        {
             mat.n_table = Some(ZTable::build(dist.scale(), TABLE_NODES, |t| {
                 masking::aps_excess(&dist, t)
             }));
         }
-        if mat.spec.terms.multiple || mat.spec.terms.diffuse {
-            let white = mat.albedo_table(false, None);
+        if needs_albedo {
+            // The albedo tables normalize the multiple/diffuse terms (to 1e-5); with
+            // masking="exact" they are filled with the tabulated masking (error below 1e-8
+            // in P) instead of a quadrature inside every node, which would take minutes.
+            // The single term itself keeps the exact masking.
+            let mut builder = mat.clone();
+            if exact {
+                builder.spec.masking = MaskingEval::Table;
+            }
+            let white = builder.albedo_table(false, None);
             let f_avg = average_reflectance(mat.spec.eta);
             let e_avg = white.e_avg;
-            mat.f_ms = f_avg * f_avg * e_avg / (1.0 - f_avg * (1.0 - e_avg));
-            mat.e_white = Some(white);
-        }
-        if mat.spec.terms.diffuse {
-            let with_ms = if mat.spec.terms.multiple {
-                mat.e_white.clone()
-            } else {
-                None
-            };
-            mat.e_spec = Some(mat.albedo_table(true, with_ms.as_ref()));
+            builder.f_ms = f_avg * f_avg * e_avg / (1.0 - f_avg * (1.0 - e_avg));
+            builder.e_white = Some(white);
+            if mat.spec.terms.diffuse {
+                let with_ms = if mat.spec.terms.multiple {
+                    builder.e_white.clone()
+                } else {
+                    None
+                };
+                builder.e_spec = Some(builder.albedo_table(true, with_ms.as_ref()));
+            }
+            mat.f_ms = builder.f_ms;
+            mat.e_white = builder.e_white;
+            mat.e_spec = builder.e_spec;
         }
         Ok(mat)
     }
@@ -335,4 +350,3 @@ fn average_over_cosine(t: &ZTable) -> f64 {
     }
     total
 }
-

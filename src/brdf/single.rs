@@ -43,12 +43,28 @@ fn facet_jones(wi: V3, wo: V3, h: V3, rs: C64, rp: C64, bases: (V3, V3, V3, V3))
 pub fn masking_over_cosines(mat: &Material, wi: V3, wo: V3) -> f64 {
     let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
     let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
-    masking_over_cosines_z(mat, wi, wo, si, so, mat.z_of(wi[2], si), mat.z_of(wo[2], so))
+    masking_over_cosines_z(
+        mat,
+        wi,
+        wo,
+        si,
+        so,
+        mat.z_of(wi[2], si),
+        mat.z_of(wo[2], so),
+    )
 }
 
 /// [`masking_over_cosines`] with the horizontal lengths and table coordinates given.
 #[inline]
-fn masking_over_cosines_z(mat: &Material, wi: V3, wo: V3, si: f64, so: f64, zi: f64, zo: f64) -> f64 {
+fn masking_over_cosines_z(
+    mat: &Material,
+    wi: V3,
+    wo: V3,
+    si: f64,
+    so: f64,
+    zi: f64,
+    zo: f64,
+) -> f64 {
     let (ci, co) = (wi[2], wo[2]);
     let (si2, so2) = (si * si, so * so);
     let ni = mat.masking_excess_z(ci, si, zi);

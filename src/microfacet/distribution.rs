@@ -205,7 +205,9 @@ impl Distribution {
         }
         match *self {
             Distribution::BlinnPhong { m } => (0.5 * (m + 2.0) * ln_cos(cos_h, sin2_h)).exp(),
-            Distribution::Beckmann { alpha } => (-0.5 * sin2_h / (cos_h * cos_h * alpha * alpha)).exp(),
+            Distribution::Beckmann { alpha } => {
+                (-0.5 * sin2_h / (cos_h * cos_h * alpha * alpha)).exp()
+            }
             Distribution::Ggx { alpha } => {
                 let a2 = alpha * alpha;
                 (a2 * cos_h * cos_h / (a2 * cos_h * cos_h + sin2_h)).sqrt()

@@ -295,8 +295,16 @@ impl ZTable {
         let p1 = v[i];
         let p2 = v[i + 1];
         // Ghost nodes by quadratic extrapolation keep third order in the end intervals.
-        let p0 = if i > 0 { v[i - 1] } else { 3.0 * p1 - 3.0 * p2 + v[(i + 2).min(n)] };
-        let p3 = if i + 2 <= n { v[i + 2] } else { 3.0 * p2 - 3.0 * p1 + v[i.saturating_sub(1)] };
+        let p0 = if i > 0 {
+            v[i - 1]
+        } else {
+            3.0 * p1 - 3.0 * p2 + v[(i + 2).min(n)]
+        };
+        let p3 = if i + 2 <= n {
+            v[i + 2]
+        } else {
+            3.0 * p2 - 3.0 * p1 + v[i.saturating_sub(1)]
+        };
         let t2 = t * t;
         let t3 = t2 * t;
         0.5 * ((2.0 * p1)
@@ -407,7 +415,10 @@ mod tests {
     fn correlation_from_cos_matches_angle_form() {
         for c in [Correlation::Seed, Correlation::Aps, Correlation::None] {
             for phi in [0.0, 0.3, 1.0, 2.0, 3.0, PI] {
-                assert!((c.f_from_cos(f64::cos(phi)) - c.f(phi)).abs() < 1e-7, "{c:?} {phi}");
+                assert!(
+                    (c.f_from_cos(f64::cos(phi)) - c.f(phi)).abs() < 1e-7,
+                    "{c:?} {phi}"
+                );
             }
         }
     }

@@ -60,7 +60,11 @@ pub fn csqrt(z: C64) -> C64 {
         return C64::new(0.0, b);
     }
     let aa = a.abs();
-    let r = if aa < 1e150 && b.abs() < 1e150 { (a * a + b * b).sqrt() } else { a.hypot(b) };
+    let r = if aa < 1e150 && b.abs() < 1e150 {
+        (a * a + b * b).sqrt()
+    } else {
+        a.hypot(b)
+    };
     let t = (0.5 * (r + aa)).sqrt();
     if a >= 0.0 {
         C64::new(t, b / (2.0 * t))
@@ -124,11 +128,23 @@ mod tests {
 
     #[test]
     fn csqrt_matches_principal_branch() {
-        for (a, b) in [(1.0, 0.0), (-1.0, 0.0), (-1.0, 1e-300), (-2.39, 6.0), (3.0, -4.0), (-1e-8, 2e6), (1e200, 1e200), (0.0, 1.0)] {
+        for (a, b) in [
+            (1.0, 0.0),
+            (-1.0, 0.0),
+            (-1.0, 1e-300),
+            (-2.39, 6.0),
+            (3.0, -4.0),
+            (-1e-8, 2e6),
+            (1e200, 1e200),
+            (0.0, 1.0),
+        ] {
             let z = C64::new(a, b);
             let got = csqrt(z);
             let want = z.sqrt();
-            assert!((got - want).norm() <= 1e-15 * want.norm(), "{z}: {got} vs {want}");
+            assert!(
+                (got - want).norm() <= 1e-15 * want.norm(),
+                "{z}: {got} vs {want}"
+            );
         }
     }
 

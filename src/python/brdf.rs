@@ -67,7 +67,11 @@ impl PyMaterial {
             Distribution::Beckmann { .. } => "beckmann",
             Distribution::Ggx { .. } => "ggx",
         };
-        Ok(PyMaterial { inner: Arc::new(inner), name, dist_name })
+        Ok(PyMaterial {
+            inner: Arc::new(inner),
+            name,
+            dist_name,
+        })
     }
 
     #[getter]
@@ -155,13 +159,19 @@ impl PyMaterial {
     fn __repr__(&self) -> String {
         let rough = match self.inner.spec.distribution {
             Distribution::BlinnPhong { m } => format!("m={m}"),
-            Distribution::Beckmann { alpha } | Distribution::Ggx { alpha } => format!("alpha={alpha}"),
+            Distribution::Beckmann { alpha } | Distribution::Ggx { alpha } => {
+                format!("alpha={alpha}")
+            }
         };
         let eta = match self.inner.spec.eta {
             Eta::Complex(e) => format!("{}{:+}j", e.re, e.im),
             Eta::PerfectConductor => "inf".into(),
         };
-        let name = self.name.as_ref().map(|n| format!(", name={n:?}")).unwrap_or_default();
+        let name = self
+            .name
+            .as_ref()
+            .map(|n| format!(", name={n:?}"))
+            .unwrap_or_default();
         format!(
             "Material({:?}, {rough}, eta={eta}, shadowing={:?}, terms={:?}{})",
             self.dist_name,
@@ -175,13 +185,19 @@ impl PyMaterial {
 /// Validate and normalize an (N, 3) array of directions in the upper hemisphere.
 pub fn directions(a: ArrayView2<'_, f64>, name: &'static str) -> crate::Result<Vec<V3>> {
     if a.ncols() != 3 {
-        return Err(crate::Error::Shape(format!("{name} must have shape (..., 3), got last axis {}", a.ncols())));
+        return Err(crate::Error::Shape(format!(
+            "{name} must have shape (..., 3), got last axis {}",
+            a.ncols()
+        )));
     }
     let mut out = Vec::with_capacity(a.nrows());
     for (i, row) in a.rows().into_iter().enumerate() {
         let v = [row[0], row[1], row[2]];
         if !v.iter().all(|x| x.is_finite()) {
-            return Err(crate::Error::InvalidDirection { name, reason: format!("element {i} = {v:?} is not finite") });
+            return Err(crate::Error::InvalidDirection {
+                name,
+                reason: format!("element {i} = {v:?} is not finite"),
+            });
         }
         let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         if (l - 1.0).abs() > 1e-6 {
@@ -202,7 +218,10 @@ pub fn directions(a: ArrayView2<'_, f64>, name: &'static str) -> crate::Result<V
 }
 
 fn to_array3(n: usize, data: Vec<[[f64; 4]; 4]>) -> Array3<f64> {
-    let flat: Vec<f64> = data.into_iter().flat_map(|m| m.into_iter().flatten()).collect();
+    let flat: Vec<f64> = data
+        .into_iter()
+        .flat_map(|m| m.into_iter().flatten())
+        .collect();
     Array3::from_shape_vec((n, 4, 4), flat).expect("shape")
 }
 
@@ -222,7 +241,12 @@ fn brdf_eval<'py>(
     let wi = directions(wi.as_array(), "wi")?;
     let wo = directions(wo.as_array(), "wo")?;
     if wi.len() != wo.len() {
-        return Err(crate::Error::Shape(format!("wi and wo have {} and {} directions", wi.len(), wo.len())).into());
+        return Err(crate::Error::Shape(format!(
+            "wi and wo have {} and {} directions",
+            wi.len(),
+            wo.len()
+        ))
+        .into());
     }
     let mat = material.inner.clone();
     let n = wi.len();
@@ -237,7 +261,9 @@ fn brdf_eval<'py>(
             }
         };
         if n >= PAR_MIN {
-            buf.par_chunks_mut(16).zip(wi.par_iter().zip(wo.par_iter())).for_each(f);
+            buf.par_chunks_mut(16)
+                .zip(wi.par_iter().zip(wo.par_iter()))
+                .for_each(f);
         } else {
             buf.chunks_mut(16).zip(wi.iter().zip(wo.iter())).for_each(f);
         }
@@ -257,7 +283,10 @@ fn specular<'py>(
     let wi = directions(wi.as_array(), "wi")?;
     let mat = material.inner.clone();
     let n = wi.len();
-    let v: Vec<_> = wi.iter().map(|w| core_brdf::specular(&mat, *w, frame)).collect();
+    let v: Vec<_> = wi
+        .iter()
+        .map(|w| core_brdf::specular(&mat, *w, frame))
+        .collect();
     Ok(to_array3(n, v).into_pyarray(py))
 }
 
@@ -269,14 +298,23 @@ fn albedo<'py>(
     order: usize,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     if !(8..=4096).contains(&order) {
-        return Err(crate::Error::param("order", order, "quadrature order must be in [8, 4096]").into());
+        return Err(
+            crate::Error::param("order", order, "quadrature order must be in [8, 4096]").into(),
+        );
     }
     let c: Vec<f64> = cos_theta_i.as_array().to_vec();
-    if let Some(bad) = c.iter().find(|x| !(x.is_finite() && (0.0..=1.0).contains(*x))) {
+    if let Some(bad) = c
+        .iter()
+        .find(|x| !(x.is_finite() && (0.0..=1.0).contains(*x)))
+    {
         return Err(crate::Error::param("wi", bad, "cos(theta_i) = wi.z must be in [0, 1]").into());
     }
     let mat = material.inner.clone();
-    let out = py.detach(move || c.par_iter().map(|&x| core_brdf::albedo(&mat, x, order)).collect::<Vec<f64>>());
+    let out = py.detach(move || {
+        c.par_iter()
+            .map(|&x| core_brdf::albedo(&mat, x, order))
+            .collect::<Vec<f64>>()
+    });
     Ok(Array1::from(out).into_pyarray(py))
 }
 
