@@ -1,0 +1,81 @@
+"""Shared pytest fixtures.
+
+* ``rng``: a seeded NumPy generator (``np.random.default_rng(12345)``), fresh per test, so
+  every test that draws random geometry is reproducible on its own.
+* ``mitsuba``: the ``mitsuba`` module with the ``llvm_ad_mono_polarized`` variant set
+  (vectorized, float32, polarized). Importing Mitsuba is deferred to the first test that
+  asks for it. If Mitsuba cannot be imported or the variant is missing, every test using
+  the fixture fails (never skips) with the reason.
+"""
+
+from __future__ import annotations
+
+import glob
+import importlib.metadata
+import os
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+MITSUBA_VARIANT = "llvm_ad_mono_polarized"
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    """Seeded random generator, the same stream in every test that uses it."""
+    return np.random.default_rng(12345)
+
+
+def _version_tuple(version: str) -> tuple[int, ...]:
+    out = []
+    for part in version.split(".")[:3]:
+        digits = "".join(ch for ch in part if ch.isdigit())
+        out.append(int(digits) if digits else 0)
+    return tuple(out)
+
+
+def _prepare_llvm() -> None:
+    """drjit >= 1.5 aborts the whole process (uncatchable) on the first kernel with
+    LLVM 15/16, so point it at a newer libLLVM before importing it, or fail cleanly.
+    drjit 1.4.0 (pinned with mitsuba 3.9.0) works with Debian 12's LLVM 15."""
+    try:
+        version = importlib.metadata.version("drjit")
+    except importlib.metadata.PackageNotFoundError:
+        pytest.fail("drjit is not installed: `pip install mitsuba==3.9.0 drjit==1.4.0` (make setup)", pytrace=False)
+    if _version_tuple(version) < (1, 5) or os.environ.get("DRJIT_LIBLLVM_PATH"):
+        return
+    candidates = sorted(
+        glob.glob("/usr/lib/llvm-1[7-9]/lib/libLLVM*.so*")
+        + glob.glob("/usr/lib/x86_64-linux-gnu/libLLVM*1[7-9]*.so*")
+        + glob.glob("/usr/lib/x86_64-linux-gnu/libLLVM.so.1[7-9]*")
+    )
+    if not candidates:
+        pytest.fail(
+            f"drjit {version} needs LLVM >= 17 (it aborts the process with LLVM 15/16); install "
+            "libllvm19 or pin mitsuba==3.9.0 / drjit==1.4.0",
+            pytrace=False,
+        )
+    os.environ["DRJIT_LIBLLVM_PATH"] = candidates[-1]
+
+
+@pytest.fixture(scope="session")
+def _mitsuba_module() -> ModuleType:
+    _prepare_llvm()
+    try:
+        import drjit  # noqa: F401
+        import mitsuba
+    except Exception as e:  # ImportError, or a missing shared library
+        pytest.fail(f"cannot import mitsuba/drjit: {e!r}", pytrace=False)
+    if MITSUBA_VARIANT not in mitsuba.variants():
+        pytest.fail(f"mitsuba has no {MITSUBA_VARIANT} variant (has {mitsuba.variants()})", pytrace=False)
+    mitsuba.set_variant(MITSUBA_VARIANT)
+    return mitsuba
+
+
+@pytest.fixture
+def mitsuba(_mitsuba_module: ModuleType) -> ModuleType:
+    """``mitsuba`` with ``llvm_ad_mono_polarized`` selected (re-selected for each test in
+    case another test switched the variant)."""
+    _mitsuba_module.set_variant(MITSUBA_VARIANT)
+    return _mitsuba_module
