@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import pprender
+from pprender import polarimetry
 
 MIRROR = np.diag([1.0, 1.0, -1.0, -1.0])
 
@@ -185,6 +186,9 @@ def test_mueller_is_physical(mat: pprender.Material, a: tuple, b: tuple) -> None
     S = PURE @ M.T
     dop = np.linalg.norm(S[:, 1:], axis=1)
     assert np.all(dop <= S[:, 0] * (1 + 1e-10) + 1e-300)
+    # Cloude: the coherency matrix is positive semidefinite (tolerance 1e-9 M00).
+    if M[0, 0] > 0:
+        assert polarimetry.is_physical(M / M[0, 0], tol=1e-9)
 
 
 @settings(max_examples=40, deadline=None)

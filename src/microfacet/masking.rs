@@ -290,7 +290,7 @@ impl ZTable {
         let v = &self.values;
         let n = v.len() - 1;
         let x = z * n as f64;
-        let i = (x.floor() as usize).min(n - 1);
+        let i = (x as usize).min(n - 1); // x >= 0: truncation is floor
         let t = x - i as f64;
         let p1 = v[i];
         let p2 = v[i + 1];

@@ -5,7 +5,7 @@ use crate::microfacet::{Correlation, Distribution, MaskingEval, Shadowing, Smith
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::{Eta, C64};
 use numpy::ndarray::{Array1, Array3, ArrayView2};
-use numpy::{IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use std::str::FromStr;
@@ -228,6 +228,28 @@ fn to_array3(n: usize, data: Vec<[[f64; 4]; 4]>) -> Array3<f64> {
 /// Batches below this run on one thread (rayon's overhead dominates).
 const PAR_MIN: usize = 2048;
 
+/// Validate and normalize one direction (row `i` of the parameter `name`).
+#[inline]
+fn direction(v: [f64; 3], name: &'static str, i: usize) -> crate::Result<V3> {
+    if !v.iter().all(|x| x.is_finite()) {
+        return Err(crate::Error::InvalidDirection { name, reason: format!("element {i} = {v:?} is not finite") });
+    }
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if (l - 1.0).abs() > 1e-6 {
+        return Err(crate::Error::InvalidDirection {
+            name,
+            reason: format!("element {i} = {v:?} has length {l}; directions must be unit vectors (|w| - 1 within 1e-6)"),
+        });
+    }
+    if v[2] < 0.0 {
+        return Err(crate::Error::InvalidDirection {
+            name,
+            reason: format!("element {i} = {v:?} is below the horizon (z < 0); directions point away from the surface, z >= 0"),
+        });
+    }
+    Ok([v[0] / l, v[1] / l, v[2] / l])
+}
+
 #[pyfunction]
 #[pyo3(name = "brdf")]
 fn brdf_eval<'py>(
@@ -238,38 +260,42 @@ fn brdf_eval<'py>(
     frame: &str,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let frame = Frame::from_str(frame)?;
-    let wi = directions(wi.as_array(), "wi")?;
-    let wo = directions(wo.as_array(), "wo")?;
-    if wi.len() != wo.len() {
-        return Err(crate::Error::Shape(format!(
-            "wi and wo have {} and {} directions",
-            wi.len(),
-            wo.len()
-        ))
-        .into());
+    let (wi, wo) = (wi.as_array(), wo.as_array());
+    for (a, name) in [(&wi, "wi"), (&wo, "wo")] {
+        if a.ncols() != 3 {
+            return Err(crate::Error::Shape(format!("{name} must have shape (..., 3), got last axis {}", a.ncols())).into());
+        }
     }
+    if wi.nrows() != wo.nrows() {
+        return Err(crate::Error::Shape(format!("wi and wo have {} and {} directions", wi.nrows(), wo.nrows())).into());
+    }
+    let n = wi.nrows();
+    // Contiguous row-major input (the Python wrapper guarantees it) read in place.
+    let (Some(a), Some(b)) = (wi.as_slice(), wo.as_slice()) else {
+        return Err(crate::Error::Shape("wi and wo must be C-contiguous".into()).into());
+    };
     let mat = material.inner.clone();
-    let n = wi.len();
-    let out = py.detach(move || {
-        // Write straight into the output buffer (no intermediate copies).
-        let mut out = Array3::<f64>::zeros((n, 4, 4));
-        let buf = out.as_slice_mut().expect("standard layout");
-        let f = |(dst, (a, b)): (&mut [f64], (&V3, &V3))| {
-            let m = core_brdf::eval(&mat, *a, *b, frame);
+    // Uninitialized output, filled in parallel: no zeroing pass, no intermediate copies.
+    let out = unsafe { PyArray3::<f64>::new(py, [n, 4, 4], false) };
+    let buf = unsafe { out.as_slice_mut() }.expect("fresh contiguous array");
+    let result: crate::Result<()> = py.detach(|| {
+        let f = |(i, dst): (usize, &mut [f64])| -> crate::Result<()> {
+            let x = direction([a[3 * i], a[3 * i + 1], a[3 * i + 2]], "wi", i)?;
+            let y = direction([b[3 * i], b[3 * i + 1], b[3 * i + 2]], "wo", i)?;
+            let m = core_brdf::eval(&mat, x, y, frame);
             for (d, s) in dst.iter_mut().zip(m.iter().flatten()) {
                 *d = *s;
             }
+            Ok(())
         };
         if n >= PAR_MIN {
-            buf.par_chunks_mut(16)
-                .zip(wi.par_iter().zip(wo.par_iter()))
-                .for_each(f);
+            buf.par_chunks_mut(16).enumerate().try_for_each(f)
         } else {
-            buf.chunks_mut(16).zip(wi.iter().zip(wo.iter())).for_each(f);
+            buf.chunks_mut(16).enumerate().try_for_each(f)
         }
-        out
     });
-    Ok(out.into_pyarray(py))
+    result?;
+    Ok(out)
 }
 
 #[pyfunction]
