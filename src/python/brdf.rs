@@ -185,36 +185,9 @@ impl PyMaterial {
 /// Validate and normalize an (N, 3) array of directions in the upper hemisphere.
 pub fn directions(a: ArrayView2<'_, f64>, name: &'static str) -> crate::Result<Vec<V3>> {
     if a.ncols() != 3 {
-        return Err(crate::Error::Shape(format!(
-            "{name} must have shape (..., 3), got last axis {}",
-            a.ncols()
-        )));
+        return Err(crate::Error::Shape(format!("{name} must have shape (..., 3), got last axis {}", a.ncols())));
     }
-    let mut out = Vec::with_capacity(a.nrows());
-    for (i, row) in a.rows().into_iter().enumerate() {
-        let v = [row[0], row[1], row[2]];
-        if !v.iter().all(|x| x.is_finite()) {
-            return Err(crate::Error::InvalidDirection {
-                name,
-                reason: format!("element {i} = {v:?} is not finite"),
-            });
-        }
-        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        if (l - 1.0).abs() > 1e-6 {
-            return Err(crate::Error::InvalidDirection {
-                name,
-                reason: format!("element {i} = {v:?} has length {l}; directions must be unit vectors (|w| - 1 within 1e-6)"),
-            });
-        }
-        if v[2] < 0.0 {
-            return Err(crate::Error::InvalidDirection {
-                name,
-                reason: format!("element {i} = {v:?} is below the horizon (z < 0); directions point away from the surface, z >= 0"),
-            });
-        }
-        out.push([v[0] / l, v[1] / l, v[2] / l]);
-    }
-    Ok(out)
+    a.rows().into_iter().enumerate().map(|(i, r)| direction([r[0], r[1], r[2]], name, i)).collect()
 }
 
 fn to_array3(n: usize, data: Vec<[[f64; 4]; 4]>) -> Array3<f64> {
