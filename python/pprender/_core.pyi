@@ -35,8 +35,15 @@ class Material:
     masking: how the APS masking integral is evaluated: "table" (per-material cubic
         table, error below 1e-8), "exact" (quadrature at each call) or "seed" (the seed's
         closed form, Blinn-Phong only; error in docs/seed-approximation.md).
-    terms: any of "single", "multiple" (energy-conserving depolarizing multiple
-        scattering), "diffuse" (Lambertian under-layer with ``diffuse_albedo``).
+    terms: any of "single", "double" (two facet reflections, src/brdf/double.rs),
+        "multiple" (energy-conserving depolarizing multiple scattering: what single and
+        double do not reflect), "diffuse" (Lambertian under-layer with ``diffuse_albedo``).
+    double_order: quadrature order of the double-bounce integral (per dimension).
+    coherent_backscatter: add the coherent-backscatter enhancement to the double bounce,
+        with width set by ``wavelength`` (m) and ``correlation_length`` (m, the rms
+        lateral separation of the two facets).
+    double_masking: "seed" (the material's correlated masking in the double bounce's
+        hit/escape probabilities: seed eq. 17, made reciprocal) or "uncorrelated".
     """
 
     def __new__(
@@ -53,6 +60,11 @@ class Material:
         terms: Sequence[str] = ...,
         diffuse_albedo: float = 0.0,
         name: str | None = None,
+        double_order: int = ...,
+        coherent_backscatter: bool = True,
+        double_masking: str = "seed",
+        wavelength: float = ...,
+        correlation_length: float = ...,
     ) -> Material: ...
     @property
     def distribution(self) -> str: ...
@@ -77,6 +89,16 @@ class Material:
     @property
     def name(self) -> str | None: ...
     @property
+    def double_order(self) -> int: ...
+    @property
+    def coherent_backscatter(self) -> bool: ...
+    @property
+    def double_masking(self) -> str: ...
+    @property
+    def wavelength(self) -> float: ...
+    @property
+    def correlation_length(self) -> float: ...
+    @property
     def e_avg(self) -> float | None: ...
     @property
     def f_ms(self) -> float: ...
@@ -86,6 +108,16 @@ def brdf(
 ) -> npt.NDArray[np.float64]: ...
 def specular(material: Material, wi: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
 def albedo(material: Material, cos_theta_i: npt.NDArray[np.float64], order: int) -> npt.NDArray[np.float64]: ...
+def double_jones(
+    material: Material,
+    wi: tuple[float, float, float] | Sequence[float],
+    wo: tuple[float, float, float] | Sequence[float],
+    h1: tuple[float, float, float] | Sequence[float],
+    frame: str,
+) -> tuple[list[list[complex]], list[float], list[float]] | None: ...
+def cbe_gamma(
+    material: Material, wi: tuple[float, float, float] | Sequence[float], wo: tuple[float, float, float] | Sequence[float]
+) -> float: ...
 
 # polarimetry
 def polarimetry_dop(stokes: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...

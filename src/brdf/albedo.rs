@@ -88,8 +88,9 @@ pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64
 }
 
 /// Total directional albedo of `mat` for unpolarized light at incidence cosine `cos_i`:
-/// the single term by an `n x n` quadrature (with the real Fresnel, not the tables), plus
-/// the multiple and diffuse terms' hemispherical integrals, which are analytic.
+/// the single term by an `n x n` quadrature (with the real Fresnel, not the tables), the
+/// double term by its quadrature over `h1` (order `min(n, 128)`) with the tabulated escape
+/// `S`, plus the multiple and diffuse terms' hemispherical integrals, which are analytic.
 pub fn albedo(mat: &Material, cos_i: f64, n: usize) -> f64 {
     let ci = cos_i.clamp(0.0, 1.0);
     let si = ((1.0 - ci) * (1.0 + ci)).sqrt();
@@ -98,14 +99,21 @@ pub fn albedo(mat: &Material, cos_i: f64, n: usize) -> f64 {
     } else {
         0.0
     };
+    let double = if mat.spec.terms.double {
+        mat.double_albedo([si, 0.0, ci], n.min(128))
+    } else {
+        0.0
+    };
     let (ms, d) = mat.lambertian_albedo(ci, si);
-    single + ms + d
+    single + double + ms + d
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::brdf::{MaterialSpec, Terms};
+    #[allow(unused_imports)]
+    use crate::brdf::material::MaterialSpec as _Spec;
     use crate::microfacet::{Distribution, MaskingEval, Shadowing, SmithG1};
     use crate::optics::fresnel::Eta;
 

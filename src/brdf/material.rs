@@ -10,34 +10,36 @@ use crate::{Error, Result};
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Terms {
     pub single: bool,
+    pub double: bool,
     pub multiple: bool,
     pub diffuse: bool,
 }
 
 impl Terms {
-    /// Parse term names: "single", "multiple", "diffuse" ("double" arrives with the
-    /// double-bounce model and is refused until then).
+    /// Parse term names: "single", "double", "multiple", "diffuse".
     pub fn parse<S: AsRef<str>>(names: &[S]) -> Result<Self> {
         let mut t = Terms {
             single: false,
+            double: false,
             multiple: false,
             diffuse: false,
         };
         for n in names {
             match n.as_ref() {
                 "single" => t.single = true,
+                "double" => t.double = true,
                 "multiple" => t.multiple = true,
                 "diffuse" => t.diffuse = true,
                 other => {
                     return Err(Error::param(
                         "terms",
                         format!("{other:?}"),
-                        "each term must be one of \"single\", \"multiple\", \"diffuse\"",
+                        "each term must be one of \"single\", \"double\", \"multiple\", \"diffuse\"",
                     ))
                 }
             }
         }
-        if !(t.single || t.multiple || t.diffuse) {
+        if !(t.single || t.double || t.multiple || t.diffuse) {
             return Err(Error::param("terms", "()", "enable at least one term"));
         }
         Ok(t)
@@ -47,6 +49,9 @@ impl Terms {
         let mut v = vec![];
         if self.single {
             v.push("single");
+        }
+        if self.double {
+            v.push("double");
         }
         if self.multiple {
             v.push("multiple");
@@ -70,6 +75,24 @@ pub struct MaterialSpec {
     pub masking: MaskingEval,
     pub terms: Terms,
     pub diffuse_albedo: f64,
+    /// Quadrature order of the double-bounce integral (per dimension).
+    pub double_order: usize,
+    /// Add the coherent-backscatter enhancement to the double bounce.
+    pub coherent_backscatter: bool,
+    /// The double bounce's hit/escape probabilities use the material's correlated masking
+    /// (the seed's eq. 17, made reciprocal; default) or uncorrelated masking.
+    pub double_correlated: bool,
+    /// Wavelength (m), for the coherent-backscatter width.
+    pub wavelength: f64,
+    /// Surface correlation length (m): rms lateral separation of the two facets.
+    pub correlation_length: f64,
+}
+
+impl MaterialSpec {
+    /// Defaults for the double-bounce parameters.
+    pub const DOUBLE_ORDER: usize = 96;
+    pub const WAVELENGTH: f64 = 1064e-9;
+    pub const CORRELATION_LENGTH: f64 = 10e-6;
 }
 
 /// Albedo tables of one layer, in `z` (see [`ZTable`]).
@@ -91,14 +114,23 @@ pub struct Material {
     /// Single-scattering albedo with `F = 1`, for the multiple term.
     pub(crate) e_white: Option<AlbedoTable>,
     /// Kulla-Conty factor `F_ms = F_avg^2 E_avg / (1 - F_avg (1 - E_avg))`.
-    pub(crate) f_ms: f64,
+    pub f_ms: f64,
     /// Albedo of the specular layer (single + multiple, real Fresnel), for the diffuse term.
     pub(crate) e_spec: Option<AlbedoTable>,
+    /// Escape after a bounce, `S(v)` (F = 1), when "double" is on: (v up, v down) tables
+    /// in `z` of `|v_z|` (the integrand changes form at the horizon, so two tables).
+    pub(crate) s_white: Option<(ZTable, ZTable)>,
+    /// The same with the unpolarized Fresnel reflectance.
+    pub(crate) s_fresnel: Option<(ZTable, ZTable)>,
 }
 
 /// Nodes of the albedo tables, and the quadrature order used to fill them.
 pub const ALBEDO_NODES: usize = 256;
 pub const ALBEDO_ORDER: usize = 128;
+/// Nodes of the double-bounce escape table S(theta_v), theta_v in [0, pi], and the
+/// quadrature order of the double-bounce albedo integrals.
+pub const S_NODES: usize = 256;
+pub const DOUBLE_TABLE_ORDER: usize = 96;
 
 impl Material {
     pub fn new(spec: MaterialSpec) -> Result<Self> {
@@ -128,6 +160,18 @@ impl Material {
                     ));
                 }
             }
+        }
+        if !(spec.wavelength.is_finite() && spec.wavelength > 0.0) {
+            return Err(Error::param("wavelength", spec.wavelength, "must be finite and > 0 (metres)"));
+        }
+        if !(spec.correlation_length.is_finite() && spec.correlation_length >= 0.0) {
+            return Err(Error::param("correlation_length", spec.correlation_length, "must be finite and >= 0 (metres)"));
+        }
+        if !(4..=1024).contains(&spec.double_order) {
+            return Err(Error::param("double_order", spec.double_order, "quadrature order must be in [4, 1024]"));
+        }
+        if spec.shadowing == Shadowing::None && spec.terms.double {
+            return Err(Error::param("shadowing", "\"none\"", "term \"double\" needs a masking model: \"aps\" or \"smith\""));
         }
         if !(spec.diffuse_albedo.is_finite() && (0.0..=1.0).contains(&spec.diffuse_albedo)) {
             return Err(Error::param(
@@ -167,6 +211,8 @@ impl Material {
             e_white: None,
             f_ms: 1.0,
             e_spec: None,
+            s_white: None,
+            s_fresnel: None,
         };
         let dist = mat.spec.distribution;
         let needs_albedo = mat.spec.terms.multiple || mat.spec.terms.diffuse;
@@ -177,6 +223,14 @@ impl Material {
             mat.n_table = Some(ZTable::build(dist.scale(), TABLE_NODES, |t| {
                 masking::aps_excess(&dist, t)
             }));
+        }
+        if mat.spec.terms.double {
+            let mut b = mat.clone();
+            if exact {
+                b.spec.masking = MaskingEval::Table;
+            }
+            mat.s_white = Some(b.escape_table(false));
+            mat.s_fresnel = Some(b.escape_table(true));
         }
         if needs_albedo {
             // The albedo tables normalize the multiple/diffuse terms (to 1e-5); with
@@ -211,9 +265,16 @@ impl Material {
     /// term's share `(1 - E_white) F_ms` when `ms` is given.
     fn albedo_table(&self, fresnel: bool, ms: Option<&AlbedoTable>) -> AlbedoTable {
         let f_ms = self.f_ms;
+        // With the double bounce on, E includes its albedo: the escape after the second
+        // bounce S(v) is tabulated over the polar angle of v in [0, pi] first.
+        let s_table = if self.spec.terms.double { Some(self.escape_table(fresnel)) } else { None };
         let e = ZTable::build(self.spec.distribution.scale(), ALBEDO_NODES, |theta| {
             let c = theta.cos();
             let mut v = super::albedo::single_albedo(self, c, fresnel, ALBEDO_ORDER);
+            if let Some(st) = &s_table {
+                let wi = [theta.sin(), 0.0, c];
+                v += super::double::double_albedo(self, wi, fresnel, DOUBLE_TABLE_ORDER, &|u| eval_escape(st, u));
+            }
             if let Some(w) = ms {
                 v += (1.0 - w.e.eval(c, theta.sin())).max(0.0) * f_ms;
             }
@@ -221,6 +282,27 @@ impl Material {
         });
         let e_avg = average_over_cosine(&e);
         AlbedoTable { e, e_avg }
+    }
+
+    /// Tabulate `S(v)` for `v` above and below the horizon, each in `z` of `|v_z|`.
+    fn escape_table(&self, fresnel: bool) -> (ZTable, ZTable) {
+        let scale = self.spec.distribution.scale();
+        let up = ZTable::build(scale, S_NODES, |th| {
+            super::double::escape_after_bounce(self, [th.sin(), 0.0, th.cos()], fresnel, DOUBLE_TABLE_ORDER)
+        });
+        let down = ZTable::build(scale, S_NODES, |th| {
+            super::double::escape_after_bounce(self, [th.sin(), 0.0, -th.cos()], fresnel, DOUBLE_TABLE_ORDER)
+        });
+        (up, down)
+    }
+
+    /// Double-bounce albedo for unpolarized light at `wi`, with the unpolarized Fresnel
+    /// product (see [`super::double::double_albedo`]), by an `n x n` quadrature over `h1`.
+    pub fn double_albedo(&self, wi: [f64; 3], n: usize) -> f64 {
+        match &self.s_fresnel {
+            Some(st) => super::double::double_albedo(self, wi, true, n, &|u| eval_escape(st, u)),
+            None => 0.0,
+        }
     }
 
     /// The masking excess `N(k)` such that `P(k) = c/(c + N)` and `P(k)/c = 1/(c + N)`
@@ -328,6 +410,14 @@ impl Material {
         };
         (ms, d)
     }
+}
+
+/// `S(v)` from its (up, down) tables.
+#[inline]
+fn eval_escape(t: &(ZTable, ZTable), v: [f64; 3]) -> f64 {
+    let s = (v[0] * v[0] + v[1] * v[1]).sqrt();
+    let table = if v[2] >= 0.0 { &t.0 } else { &t.1 };
+    table.eval(v[2].abs(), s).max(0.0)
 }
 
 /// `2 int_0^1 E(mu) mu dmu` from a table, by Gauss-Legendre on panels in theta that are

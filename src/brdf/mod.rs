@@ -14,6 +14,7 @@
 //! [`Material`] owns the per-material tables (masking, albedo), built once.
 
 pub mod albedo;
+pub mod double;
 pub mod material;
 pub mod single;
 

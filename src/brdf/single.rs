@@ -123,6 +123,14 @@ pub fn eval(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
             }
         }
     }
+    if terms.double {
+        let m2 = super::double::eval_double_framed(mat, wi, wo, frame);
+        for (row, r2) in m.iter_mut().zip(m2.iter()) {
+            for (x, y) in row.iter_mut().zip(r2.iter()) {
+                *x += y;
+            }
+        }
+    }
     if terms.multiple {
         m[0][0] += mat.multiple_z(zi, zo);
     }

@@ -34,7 +34,9 @@ impl PyMaterial {
     #[new]
     #[pyo3(signature = (distribution="blinn_phong", *, m=None, alpha=None, eta=C64::new(1.5, 0.0),
         shadowing="aps", correlation=None, smith_g1="exact", masking="table",
-        terms=vec!["single".to_string(), "multiple".to_string()], diffuse_albedo=0.0, name=None))]
+        terms=vec!["single".to_string(), "multiple".to_string()], diffuse_albedo=0.0, name=None,
+        double_order=MaterialSpec::DOUBLE_ORDER, coherent_backscatter=true, double_masking="seed",
+        wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -49,6 +51,11 @@ impl PyMaterial {
         terms: Vec<String>,
         diffuse_albedo: f64,
         name: Option<String>,
+        double_order: usize,
+        coherent_backscatter: bool,
+        double_masking: &str,
+        wavelength: f64,
+        correlation_length: f64,
     ) -> PyResult<Self> {
         let dist = Distribution::new(distribution, m, alpha)?;
         let spec = MaterialSpec {
@@ -60,6 +67,22 @@ impl PyMaterial {
             masking: MaskingEval::from_str(masking)?,
             terms: Terms::parse(&terms)?,
             diffuse_albedo,
+            double_order,
+            coherent_backscatter,
+            double_correlated: match double_masking {
+                "seed" => true,
+                "uncorrelated" => false,
+                other => {
+                    return Err(crate::Error::param(
+                        "double_masking",
+                        format!("{other:?}"),
+                        "expected \"seed\" (correlated, eq. 17 made reciprocal) or \"uncorrelated\"",
+                    )
+                    .into())
+                }
+            },
+            wavelength,
+            correlation_length,
         };
         let inner = py.detach(|| core_brdf::Material::new(spec))?;
         let dist_name = match dist {
@@ -135,6 +158,30 @@ impl PyMaterial {
     #[getter]
     fn terms(&self) -> Vec<&'static str> {
         self.inner.spec.terms.names()
+    }
+    #[getter]
+    fn double_order(&self) -> usize {
+        self.inner.spec.double_order
+    }
+    #[getter]
+    fn coherent_backscatter(&self) -> bool {
+        self.inner.spec.coherent_backscatter
+    }
+    #[getter]
+    fn double_masking(&self) -> &'static str {
+        if self.inner.spec.double_correlated {
+            "seed"
+        } else {
+            "uncorrelated"
+        }
+    }
+    #[getter]
+    fn wavelength(&self) -> f64 {
+        self.inner.spec.wavelength
+    }
+    #[getter]
+    fn correlation_length(&self) -> f64 {
+        self.inner.spec.correlation_length
     }
     #[getter]
     fn diffuse_albedo(&self) -> f64 {
@@ -317,7 +364,34 @@ fn albedo<'py>(
     Ok(Array1::from(out).into_pyarray(py))
 }
 
+/// Jones matrix of one double-reflection path `-wi -> h1 -> d -> h2 -> wo` (beam frames of
+/// `frame`), with `d` and `h2`; `None` when the path does not exist.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn double_jones(
+    material: &PyMaterial,
+    wi: [f64; 3],
+    wo: [f64; 3],
+    h1: [f64; 3],
+    frame: &str,
+) -> PyResult<Option<([[C64; 2]; 2], [f64; 3], [f64; 3])>> {
+    let frame = Frame::from_str(frame)?;
+    let wi = direction(wi, "wi", 0)?;
+    let wo = direction(wo, "wo", 0)?;
+    let h1 = direction(h1, "h1", 0)?;
+    Ok(crate::brdf::double::double_jones(&material.inner, wi, wo, h1, frame))
+}
+
+/// Coherent-backscatter decorrelation factor gamma for a material and directions.
+#[pyfunction]
+fn cbe_gamma(material: &PyMaterial, wi: [f64; 3], wo: [f64; 3]) -> f64 {
+    let s = &material.inner.spec;
+    crate::brdf::double::cbe_gamma(s.wavelength, s.correlation_length, wi, wo)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(double_jones, m)?)?;
+    m.add_function(wrap_pyfunction!(cbe_gamma, m)?)?;
     m.add_class::<PyMaterial>()?;
     m.add_function(wrap_pyfunction!(brdf_eval, m)?)?;
     m.add_function(wrap_pyfunction!(specular, m)?)?;

@@ -1,0 +1,418 @@
+//! Double bounce and coherent backscatter (PHYSICS.md section 5; seed eq. 12-17).
+//!
+//! # Model
+//! Light arriving along `-wi` reflects off facet `h1` into `d = 2 (wi.h1) h1 - wi`, then off
+//! a facet `h2 = normalize(wo - d)` toward `wo`. With the visible-normal density of the
+//! first facet `P(wi) (wi.h1)+ D(h1) / cos_i`, the probability that the ray along `d` is
+//! blocked (`1 - P(d)` if `d` points up, 1 if down), the density of the facet it hits,
+//! `(u.h2)+ D(h2) / norm(u)` with `u = -d` (`norm(u) = cos_u + N(u)` if `u` points up and
+//! `N(|u|)` if down, since `int (v.h)+ D = cos + N` and `int (-v.h)+ D = N`), the Jacobian
+//! `d omega_o = 4 (u.h2) d omega_h2` and the escape probability `P(wo)`:
+//!
+//! `f2(wi, wo) = Q(wi) Q(wo) / 4  int d omega_h1  (wi.h1)+ D(h1) D(h2) T(d) M(h1, h2)`
+//!
+//! with `Q = P / cos` and `T(d) = 1 / (|d_z| + N(|d|))` in both cases (blocked fraction
+//! over hit-density normalization: `(1 - P)/N = 1/(c + N)` going up, `1/(c + N)` going
+//! down). `T(d) = T(-d)` and `(wi.h1) d omega_h1 = d omega_d / 4 = (wo.h2) d omega_h2`, so
+//! the integrand is symmetric under reversing the path: **f2 is reciprocal by
+//! construction**. The hit and escape probabilities are uncorrelated masking (the
+//! `"uncorrelated"` P2; the seed's eq. 17 uses correlated visibilities and breaks this
+//! symmetry, see docs/double-bounce.md). `M` is the Mueller matrix of the composed
+//! polarization ray-tracing matrices `P2 P1` projected on the beam frames.
+//!
+//! At exact backscatter `h2 = normalize(wi - d)` is perpendicular to `h1` and both
+//! reflections share one plane of incidence with `theta1 + theta2 = 90 deg` (seed eq. 14):
+//! the Jones matrix is `diag(rs1 rs2, rp1 rp2)` in that plane's s/p basis (tested).
+//!
+//! # Quadrature
+//! `h1` through the projected-area CDF of `D` in `w = sqrt(1 - u)` (as the albedo
+//! integrator): `D(h1) d omega = 2 w dw dphi / (2 pi cos(theta_h1))`; Gauss-Legendre in
+//! `w` and the periodic trapezoid rule in `phi`, `order` points each.
+//!
+//! # Coherent backscatter
+//! A double path and its reverse (through the same facets in the other order, intermediate
+//! direction `-d`) add in amplitude. Near backscatter the reverse path's Jones matrix is
+//! the reciprocal partner: in the sp frame at `wi = wo`, `J_rev = F J^T F`, `F = diag(-1, 1)`
+//! (see `mueller::reciprocal`). The pair then contributes `M(J + e^{i Delta} J_rev)` instead
+//! of `M(J) + M(J_rev)`; with `Delta = q . (r2 - r1)`, `q = (2 pi / lambda)(wo - wi)` and
+//! lateral facet separations Gaussian with rms `l` (the surface correlation length) per
+//! axis, `<cos Delta> = gamma = exp(-(|q_xy| l)^2 / 2)`. The enhancement added to `f2` is
+//! `gamma / 2  int ... [M(J + J_rev) - M(J) - M(J_rev)]` (each pair is met twice over `d`);
+//! for co-polarized light it equals the incoherent co-polarized double scatter at `beta = 0`
+//! (factor 2) and vanishes for `gamma < 1e-6` (skipped). Its angular integral is of order
+//! `(lambda / l)^2` and is left out of the energy bookkeeping.
+
+use super::material::Material;
+use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, Frame, V3};
+use crate::optics::fresnel::{fresnel_amplitudes, C64};
+use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
+use std::f64::consts::PI;
+
+/// A complex 3-vector (a field).
+type CV3 = [C64; 3];
+
+/// Apply the polarization ray-tracing matrix of a reflection off facet `h` (incident
+/// propagation `k_in`, reflected `k_out`) to the field `e`:
+/// `rs s (s.e) + rp p_out (p_in.e)`, `s = normalize(k_in x h)` (any vector normal to
+/// `k_in` at normal incidence on the facet, where the result does not depend on it).
+#[inline]
+fn reflect_field(e: CV3, k_in: V3, k_out: V3, h: V3, rs: C64, rp: C64, fallback: V3) -> CV3 {
+    let c = cross(k_in, h);
+    let s = if dot(c, c) > 1e-24 {
+        normalize(c)
+    } else {
+        // a unit vector normal to k_in
+        let f = cross(k_in, fallback);
+        if dot(f, f) > 1e-24 { normalize(f) } else { normalize(cross(k_in, [1.0, 0.0, 0.0])) }
+    };
+    let p_in = cross(k_in, s);
+    let p_out = cross(k_out, s);
+    let es = s[0] * e[0] + s[1] * e[1] + s[2] * e[2];
+    let ep = p_in[0] * e[0] + p_in[1] * e[1] + p_in[2] * e[2];
+    let (a, b) = (rs * es, rp * ep);
+    [s[0] * a + p_out[0] * b, s[1] * a + p_out[1] * b, s[2] * a + p_out[2] * b]
+}
+
+/// Jones matrix (beam frames of `frame`) of the double reflection `-wi -> h1 -> d -> h2 -> wo`.
+/// Returns `None` when the path does not exist (`h2` below the horizon or a facet seen from
+/// behind).
+pub fn double_jones(mat: &Material, wi: V3, wo: V3, h1: V3, frame: Frame) -> Option<(Jones, V3, V3)> {
+    let wi_h1 = dot(wi, h1);
+    if wi_h1 <= 0.0 || h1[2] <= 0.0 {
+        return None;
+    }
+    let d = [2.0 * wi_h1 * h1[0] - wi[0], 2.0 * wi_h1 * h1[1] - wi[1], 2.0 * wi_h1 * h1[2] - wi[2]];
+    let hs = [wo[0] - d[0], wo[1] - d[1], wo[2] - d[2]];
+    let l2 = dot(hs, hs);
+    if l2 <= 1e-300 {
+        return None;
+    }
+    let h2 = normalize(hs);
+    if h2[2] <= 0.0 {
+        return None;
+    }
+    let c2 = dot(wo, h2);
+    if c2 <= 0.0 {
+        return None;
+    }
+    let (rs1, rp1) = fresnel_amplitudes(wi_h1.min(1.0), mat.spec.eta);
+    let (rs2, rp2) = fresnel_amplitudes(c2.min(1.0), mat.spec.eta);
+    let (x_in, y_in, x_out, y_out) = beam_bases(frame, wi, wo);
+    let k_in = neg(wi);
+    let mut j = [[C64::new(0.0, 0.0); 2]; 2];
+    for (b, e_in) in [x_in, y_in].into_iter().enumerate() {
+        let e0 = [C64::new(e_in[0], 0.0), C64::new(e_in[1], 0.0), C64::new(e_in[2], 0.0)];
+        let e1 = reflect_field(e0, k_in, d, h1, rs1, rp1, x_in);
+        let e2 = reflect_field(e1, d, wo, h2, rs2, rp2, x_out);
+        for (a, ax) in [x_out, y_out].into_iter().enumerate() {
+            j[a][b] = e2[0] * ax[0] + e2[1] * ax[1] + e2[2] * ax[2];
+        }
+    }
+    Some((j, d, h2))
+}
+
+/// `(P(a) - P(a, b)) / (N(b) cos_a)` for `a`, `b` above the horizon: the probability that a
+/// facet seen from `a` is blocked toward `b`, over the hit-density normalization `N(b)`, in
+/// the material's correlated masking (seed eq. 6) or uncorrelated when `correlated` is
+/// false. Written without cancellation: with `f` the correlation of the azimuths,
+/// `= (1 - f) Q(a) / (c_b + N_b) + f max(0, N_b - c_b N_a / c_a) / (N_b (c_a + N_a)(c_b + N_b))`.
+#[inline]
+pub(crate) fn blocked_over_n(mat: &Material, a: V3, b: V3, correlated: bool) -> f64 {
+    let (ca, cb) = (a[2], b[2]);
+    if ca <= 0.0 || cb < 0.0 {
+        return 0.0;
+    }
+    let sa = (a[0] * a[0] + a[1] * a[1]).sqrt();
+    let sb = (b[0] * b[0] + b[1] * b[1]).sqrt();
+    let na = mat.masking_excess(ca, sa);
+    let nb = mat.masking_excess(cb, sb);
+    let f = if !correlated || mat.correlation == crate::microfacet::Correlation::None {
+        0.0
+    } else if sa > 0.0 && sb > 0.0 {
+        mat.correlation.f_from_cos(((a[0] * b[0] + a[1] * b[1]) / (sa * sb)).clamp(-1.0, 1.0))
+    } else {
+        1.0
+    };
+    let first = (1.0 - f) / ((ca + na) * (cb + nb));
+    let second = if f > 0.0 && nb > 0.0 {
+        f * (nb - cb * na / ca).max(0.0) / (nb * (ca + na) * (cb + nb))
+    } else {
+        0.0
+    };
+    first + second
+}
+
+/// The path weight over `cos_i cos_o` of the double bounce with intermediate direction
+/// `d` (module docs): `d` up: `(P_i - P(wi, d)) / N(d) * P_o`; `d` down: the mirror image
+/// `P_i (P_o - P(wo, -d)) / N(-d)`; both over `cos_i cos_o`. Reciprocal: reversing the
+/// path swaps the two forms.
+#[inline]
+fn path_weight(mat: &Material, wi: V3, wo: V3, d: V3) -> f64 {
+    let correlated = mat.spec.double_correlated;
+    if d[2] >= 0.0 {
+        blocked_over_n(mat, wi, d, correlated) * q_of(mat, wo)
+    } else {
+        q_of(mat, wi) * blocked_over_n(mat, wo, neg(d), correlated)
+    }
+}
+
+/// `Q(k) = P(k) / cos = 1 / (cos + N)`.
+#[inline]
+pub(crate) fn q_of(mat: &Material, k: V3) -> f64 {
+    let c = k[2];
+    let s = (k[0] * k[0] + k[1] * k[1]).sqrt();
+    1.0 / (c + mat.masking_excess(c, s))
+}
+
+/// Coherent-backscatter decorrelation `gamma = exp(-(|q_xy| l)^2 / 2)`.
+#[inline]
+pub fn cbe_gamma(wavelength: f64, correlation_length: f64, wi: V3, wo: V3) -> f64 {
+    let k = 2.0 * PI / wavelength;
+    let qx = k * (wo[0] - wi[0]);
+    let qy = k * (wo[1] - wi[1]);
+    let x = (qx * qx + qy * qy) * correlation_length * correlation_length;
+    (-0.5 * x).exp()
+}
+
+/// `M(J + J') - M(J) - M(J')`: the interference of two amplitudes.
+#[inline]
+fn interference(j: &Jones, jr: &Jones) -> Mat4 {
+    let mut s = *j;
+    for a in 0..2 {
+        for b in 0..2 {
+            s[a][b] += jr[a][b];
+        }
+    }
+    let (m, m1, m2) = (jones_to_mueller(&s), jones_to_mueller(j), jones_to_mueller(jr));
+    let mut r = [[0.0; 4]; 4];
+    for i in 0..4 {
+        for k in 0..4 {
+            r[i][k] = m[i][k] - m1[i][k] - m2[i][k];
+        }
+    }
+    r
+}
+
+/// Breakpoints in `theta_h` (for a given azimuth of `h`) where a ray from direction `v`
+/// reflected off `h` crosses the height `z` (`d_z = R cos(2 theta - delta)` with
+/// `R = sqrt(s_v^2 cos^2 phi + c_v^2)`, `delta = atan2(s_v cos phi, c_v)`), and where
+/// `v.h` changes sign; pushed into `out` when inside (0, pi/2).
+fn push_breaks(v: V3, cos_phi: f64, sin_phi: f64, zs: &[f64], out: &mut Vec<f64>) {
+    let s_v = v[0] * cos_phi + v[1] * sin_phi; // horizontal part of v along phi
+    let c_v = v[2];
+    let r = (s_v * s_v + c_v * c_v).sqrt();
+    let delta = s_v.atan2(c_v);
+    let inside = |t: f64, out: &mut Vec<f64>| {
+        if t > 0.0 && t < 0.5 * PI {
+            out.push(t);
+        }
+    };
+    for &z in zs {
+        if r > 0.0 && z.abs() < r {
+            let a = (z / r).acos();
+            for k in -2..=2 {
+                let base = 2.0 * PI * k as f64;
+                inside(0.5 * (delta + a + base), out);
+                inside(0.5 * (delta - a + base), out);
+            }
+        }
+    }
+    // v.h = s_v sin(theta) + c_v cos(theta) = 0
+    let t = (-c_v).atan2(s_v);
+    for k in -1..=1 {
+        inside(t + PI * k as f64, out);
+    }
+}
+
+/// Integrate over facet normals `h` distributed as `D(h) d omega_h`: `phi` by the periodic
+/// trapezoid rule and `theta_h` in `w = sqrt(1 - u)` by Gauss-Legendre on every segment
+/// between the breakpoints `breaks(cos phi, sin phi)`, so that the kinks and cuts of the
+/// integrand fall on segment ends. `f(h, weight)` accumulates; `weight` includes the
+/// measure `D(h) d omega_h`.
+fn integrate_h(
+    mat: &Material,
+    order: usize,
+    phi0: f64,
+    breaks: &dyn Fn(f64, f64, &mut Vec<f64>),
+    f: &mut dyn FnMut(V3, f64),
+) {
+    let (n_phi, n_w) = (order, order);
+    let dist = mat.spec.distribution;
+    let rule = crate::quad::gauss_legendre(n_w);
+    let mut bps = Vec::with_capacity(16);
+    // phi: Gauss-Legendre on two half turns starting at phi0 (a singular azimuth sits on
+    // the panel ends, where Gauss-Legendre copes with it).
+    let prule = crate::quad::gauss_legendre(n_phi.div_ceil(2));
+    let phis: Vec<(f64, f64)> = (0..2)
+        .flat_map(|half| {
+            let prule = prule.clone();
+            (0..prule.x.len()).map(move |i| (phi0 + PI * (half as f64 + prule.x[i]), PI * prule.w[i]))
+        })
+        .collect();
+    for &(phi, dphi) in &phis {
+        let (sp, cp) = phi.sin_cos();
+        bps.clear();
+        bps.push(0.0);
+        bps.push(0.5 * PI);
+        breaks(cp, sp, &mut bps);
+        bps.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        for seg in bps.windows(2) {
+            let (t0, t1) = (seg[0], seg[1]);
+            if t1 - t0 < 1e-15 {
+                continue;
+            }
+            let (s0, c0) = t0.sin_cos();
+            let (s1, c1) = t1.sin_cos();
+            // w decreases with theta
+            let w_hi = dist.w_of(c0, s0 * s0);
+            let w_lo = dist.w_of(c1.max(0.0), s1 * s1);
+            let span = w_hi - w_lo;
+            if span <= 0.0 {
+                continue;
+            }
+            for (&xw, &ww) in rule.x.iter().zip(&rule.w) {
+                let w = w_lo + span * xw;
+                let (ch, s2h) = dist.sample_w(w);
+                if ch <= 0.0 {
+                    continue;
+                }
+                let sh = s2h.sqrt();
+                // D d omega = 2 w dw dphi / (2 pi cos)
+                let weight = ww * span * 2.0 * w / (2.0 * PI * ch) * dphi;
+                f([sh * cp, sh * sp, ch], weight);
+            }
+        }
+    }
+}
+
+/// The double-bounce Mueller BRDF (1/sr, no cosine), with the coherent-backscatter
+/// enhancement when `cbe` is true, by an `order x order` quadrature over `h1` split where
+/// `d` crosses the horizon, where `h2` would (d_z = wo_z) and where `wi.h1 = 0`.
+pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, cbe: bool) -> Mat4 {
+    let mut acc = [[0.0; 4]; 4];
+    if wi[2] <= 0.0 || wo[2] <= 0.0 {
+        return acc;
+    }
+    let gamma = if cbe { cbe_gamma(mat.spec.wavelength, mat.spec.correlation_length, wi, wo) } else { 0.0 };
+    let use_cbe = gamma > 1e-6;
+    let dist = mat.spec.distribution;
+    let f = [-1.0, 1.0];
+    let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| push_breaks(wi, cp, sp, &[0.0, wo[2]], out);
+    let mut body = |h1: V3, wgt: f64| {
+        let Some((j, d, h2)) = double_jones(mat, wi, wo, h1, frame) else { return };
+        let d2 = dist.d(h2[2], h2[0] * h2[0] + h2[1] * h2[1]);
+        if d2 == 0.0 {
+            return;
+        }
+        let weight = wgt * dot(wi, h1) * d2 * path_weight(mat, wi, wo, d);
+        let m = jones_to_mueller(&j);
+        for a in 0..4 {
+            for b in 0..4 {
+                acc[a][b] += weight * m[a][b];
+            }
+        }
+        if use_cbe {
+            // reverse path amplitude: J_rev = F J^T F (sp frame at backscatter)
+            let jr = [
+                [j[0][0] * (f[0] * f[0]), j[1][0] * (f[0] * f[1])],
+                [j[0][1] * (f[1] * f[0]), j[1][1] * (f[1] * f[1])],
+            ];
+            let it = interference(&j, &jr);
+            for a in 0..4 {
+                for b in 0..4 {
+                    acc[a][b] += 0.5 * gamma * weight * it[a][b];
+                }
+            }
+        }
+    };
+    // The integrand has a point singularity where d = wo (h1 = normalize(wi + wo)): there
+    // h2 = normalize(wo - d) has a direction-dependent limit. Its azimuth is phi0.
+    let hs = [wi[0] + wo[0], wi[1] + wo[1]];
+    let phi0 = if hs[0] * hs[0] + hs[1] * hs[1] > 1e-24 { hs[1].atan2(hs[0]) } else { wi[1].atan2(wi[0]) };
+    integrate_h(mat, order, phi0, &breaks, &mut body);
+    let scale = 0.25;
+    for row in acc.iter_mut() {
+        for x in row.iter_mut() {
+            *x *= scale;
+        }
+    }
+    acc
+}
+
+/// The escape after the second bounce, by the direction `v` the ray arrives from
+/// (`d2 = reflect(v, h)`): for `v` below the horizon `S(v) = int (v.h)+ D(h) P(d2) d omega_h`;
+/// for `v` above, `int (v.h)+ D(h) (P(d2) - P(d2, v)) / N(v) d omega_h` (the mirror form of
+/// the path weight). With the unpolarized Fresnel reflectance when `fresnel`.
+pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -> f64 {
+    let mut total = 0.0;
+    let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| push_breaks(v, cp, sp, &[0.0], out);
+    let mut body = |h: V3, wgt: f64| {
+        let vh = dot(v, h);
+        if vh <= 0.0 {
+            return;
+        }
+        let d2 = [2.0 * vh * h[0] - v[0], 2.0 * vh * h[1] - v[1], 2.0 * vh * h[2] - v[2]];
+        if d2[2] <= 0.0 {
+            return;
+        }
+        // v down (the ray went up and was blocked): escape P(d2); v up (the ray went down):
+        // the escape of a facet that was reached from above along -v, (P(d2) - P(d2, v)) / N(v).
+        let p = if v[2] < 0.0 {
+            d2[2] * q_of(mat, d2)
+        } else {
+            d2[2] * blocked_over_n(mat, d2, v, mat.spec.double_correlated)
+        };
+        let fr = if fresnel { crate::optics::fresnel::reflectance(vh.min(1.0), mat.spec.eta) } else { 1.0 };
+        total += wgt * vh * p * fr;
+    };
+    integrate_h(mat, order, v[1].atan2(v[0]), &breaks, &mut body);
+    total
+}
+
+/// Double-bounce directional albedo `E2(wi) = int (wi.h1)+ D(h1) w(d) S(-d) d omega_h1`,
+/// `w = (P_i - P(wi, d)) / (N(d) cos_i)` for `d` up and `Q(wi)` for `d` down
+/// (with the unpolarized Fresnel reflectance at both bounces when `fresnel`, an
+/// approximation that ignores the polarization coupling of the two reflections), using
+/// `s_of(-d)` for the inner integral.
+pub fn double_albedo(mat: &Material, wi: V3, fresnel: bool, order: usize, s_of: &dyn Fn(V3) -> f64) -> f64 {
+    let mut total = 0.0;
+    let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| push_breaks(wi, cp, sp, &[0.0], out);
+    let mut body = |h1: V3, wgt: f64| {
+        let wh = dot(wi, h1);
+        if wh <= 0.0 {
+            return;
+        }
+        let d = [2.0 * wh * h1[0] - wi[0], 2.0 * wh * h1[1] - wi[1], 2.0 * wh * h1[2] - wi[2]];
+        let fr = if fresnel { crate::optics::fresnel::reflectance(wh.min(1.0), mat.spec.eta) } else { 1.0 };
+        let w = if d[2] >= 0.0 {
+            blocked_over_n(mat, wi, d, mat.spec.double_correlated)
+        } else {
+            q_of(mat, wi)
+        };
+        total += wgt * wh * w * s_of(neg(d)) * fr;
+    };
+    integrate_h(mat, order, wi[1].atan2(wi[0]), &breaks, &mut body);
+    total
+}
+
+/// [`eval_double`] in the sp frame (where the coherent-backscatter reverse amplitude is
+/// derived), then expressed in `frame` by the Stokes rotations between the bases.
+pub fn eval_double_framed(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
+    let m = eval_double(mat, wi, wo, Frame::Sp, mat.spec.double_order, mat.spec.coherent_backscatter);
+    if frame == Frame::Sp {
+        return m;
+    }
+    change_frame(&m, wi, wo, Frame::Sp, frame)
+}
+
+/// Express a Mueller matrix given in the beam frames `from` in the frames `to`.
+pub fn change_frame(m: &Mat4, wi: V3, wo: V3, from: Frame, to: Frame) -> Mat4 {
+    let (xi1, yi1, xo1, yo1) = beam_bases(from, wi, wo);
+    let (xi2, yi2, xo2, yo2) = beam_bases(to, wi, wo);
+    let c = |a: f64| C64::new(a, 0.0);
+    // input: components in basis 2 -> basis 1; output: basis 1 -> basis 2
+    let jin = [[c(dot(xi1, xi2)), c(dot(xi1, yi2))], [c(dot(yi1, xi2)), c(dot(yi1, yi2))]];
+    let jout = [[c(dot(xo2, xo1)), c(dot(xo2, yo1))], [c(dot(yo2, xo1)), c(dot(yo2, yo1))]];
+    let (min, mout) = (jones_to_mueller(&jin), jones_to_mueller(&jout));
+    crate::optics::mueller::matmul(&mout, &crate::optics::mueller::matmul(m, &min))
+}
