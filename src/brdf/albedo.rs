@@ -112,27 +112,24 @@ pub fn albedo(mat: &Material, cos_i: f64, n: usize) -> f64 {
 mod tests {
     use super::*;
     use crate::brdf::{MaterialSpec, Terms};
-    #[allow(unused_imports)]
-    use crate::brdf::material::MaterialSpec as _Spec;
-    use crate::microfacet::{Distribution, MaskingEval, Shadowing, SmithG1};
+    use crate::microfacet::{Distribution, Shadowing};
     use crate::optics::fresnel::Eta;
 
     fn furnace(distribution: Distribution, shadowing: Shadowing) -> Material {
-        Material::new(MaterialSpec {
-            distribution,
-            eta: Eta::PerfectConductor,
-            shadowing,
-            correlation: None,
-            smith_g1: SmithG1::Exact,
-            masking: MaskingEval::Table,
-            terms: Terms {
-                single: true,
-                multiple: true,
-                diffuse: false,
-            },
-            diffuse_albedo: 0.0,
-        })
-        .unwrap()
+        Material::new(MaterialSpec { shadowing, ..MaterialSpec::new(distribution, Eta::PerfectConductor) }).unwrap()
+    }
+
+    #[test]
+    fn white_furnace_with_double() {
+        let spec = MaterialSpec {
+            terms: Terms { single: true, double: true, multiple: true, diffuse: false },
+            ..MaterialSpec::new(Distribution::Beckmann { alpha: 0.5 }, Eta::PerfectConductor)
+        };
+        let mat = Material::new(spec).unwrap();
+        for deg in [0.0f64, 45.0, 80.0] {
+            let a = albedo(&mat, deg.to_radians().cos(), 128);
+            assert!((a - 1.0).abs() < 1e-4, "{deg}: {a}");
+        }
     }
 
     #[test]

@@ -89,6 +89,26 @@ pub struct MaterialSpec {
 }
 
 impl MaterialSpec {
+    /// A spec with the Python defaults: APS masking (tabulated, seed correlation), single +
+    /// multiple terms, no diffuse layer, double-bounce parameters at their defaults.
+    pub fn new(distribution: Distribution, eta: Eta) -> Self {
+        MaterialSpec {
+            distribution,
+            eta,
+            shadowing: Shadowing::Aps,
+            correlation: None,
+            smith_g1: SmithG1::Exact,
+            masking: MaskingEval::Table,
+            terms: Terms { single: true, double: false, multiple: true, diffuse: false },
+            diffuse_albedo: 0.0,
+            double_order: Self::DOUBLE_ORDER,
+            coherent_backscatter: true,
+            double_correlated: true,
+            wavelength: Self::WAVELENGTH,
+            correlation_length: Self::CORRELATION_LENGTH,
+        }
+    }
+
     /// Defaults for the double-bounce parameters.
     pub const DOUBLE_ORDER: usize = 96;
     pub const WAVELENGTH: f64 = 1064e-9;
