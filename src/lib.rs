@@ -15,6 +15,7 @@ pub mod error;
 pub mod microfacet;
 pub mod optics;
 pub mod quad;
+pub mod reference;
 
 #[cfg(feature = "python")]
 mod python;

@@ -3,7 +3,7 @@
 # pure-Python modules that wrap these functions.
 
 from collections.abc import Sequence
-from typing import final
+from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
@@ -175,3 +175,26 @@ def smith_g1(
     alpha: npt.ArrayLike | None = None,
     variant: str = "exact",
 ) -> npt.NDArray[np.float64]: ...
+
+# explicit-microsurface reference (src/reference)
+def reference_microsurface(
+    wi: npt.NDArray[np.float64],
+    wo: npt.NDArray[np.float64],
+    alpha: float | None,
+    eta: complex,
+    rays: int,
+    grid: int,
+    correlation_length: float,
+    cone: float,
+    max_order: int,
+    frame: str,
+    seed: int,
+    batches: int,
+    heights: npt.NDArray[np.float64] | None = None,
+) -> dict[str, Any]: ...
+def reference_height_field(
+    alpha: float, grid: int, correlation_length: float, seed: int, batch: int
+) -> dict[str, Any]: ...
+def monostatic_table(
+    material: Material, nodes: int = 64, double_order: int = 48, measure: bool = True
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float, float | None]: ...

@@ -17,6 +17,7 @@ pub mod albedo;
 pub mod double;
 pub mod material;
 pub mod single;
+pub mod table;
 
 pub use albedo::{albedo, single_albedo};
 pub use material::{Material, MaterialSpec, Terms};

@@ -317,6 +317,16 @@ impl ZTable {
     pub fn eval(&self, cos_t: f64, sin_t: f64) -> f64 {
         self.eval_z(self.z_of(cos_t, sin_t))
     }
+
+    /// [`Self::eval_z`] clamped to the range of the two bracketing nodes (no overshoot:
+    /// for data with jumps, such as a logarithm that falls to its floor).
+    #[inline]
+    pub fn eval_z_bounded(&self, z: f64) -> f64 {
+        let n = self.values.len() - 1;
+        let i = ((z * n as f64) as usize).min(n - 1);
+        let (a, b) = (self.values[i], self.values[i + 1]);
+        self.eval_z(z).clamp(a.min(b), a.max(b))
+    }
 }
 
 /// Default node count of the per-material masking tables.

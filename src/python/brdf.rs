@@ -382,6 +382,46 @@ fn double_jones(
     Ok(crate::brdf::double::double_jones(&material.inner, wi, wo, h1, frame))
 }
 
+/// Monostatic table: (theta nodes, Mueller values (n+1, 4, 4), build seconds, max
+/// interpolation error relative to M00 against the material's own evaluation).
+#[pyfunction]
+#[pyo3(signature = (material, nodes=64, double_order=48, measure=true))]
+#[allow(clippy::type_complexity)]
+fn monostatic_table<'py>(
+    py: Python<'py>,
+    material: &PyMaterial,
+    nodes: usize,
+    double_order: usize,
+    measure: bool,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray3<f64>>, f64, Option<f64>)> {
+    if !(4..=100_000).contains(&nodes) {
+        return Err(crate::Error::param("nodes", nodes, "must be in [4, 100000]").into());
+    }
+    if !(4..=1024).contains(&double_order) {
+        return Err(crate::Error::param("double_order", double_order, "must be in [4, 1024]").into());
+    }
+    let mat = material.inner.clone();
+    let (table, secs, err) = py.detach(move || {
+        let t0 = std::time::Instant::now();
+        let table = crate::brdf::table::MonostaticTable::build(&mat, nodes, double_order);
+        let secs = t0.elapsed().as_secs_f64();
+        let err = if measure { Some(table.max_error(&mat)) } else { None };
+        (table, secs, err)
+    });
+    let scale = table.elements[0].scale;
+    let n = nodes + 1;
+    let theta: Vec<f64> = (0..n).map(|i| crate::microfacet::masking::ZTable::theta_of_z(scale, i as f64 / nodes as f64)).collect();
+    let mut vals = Array3::<f64>::zeros((n, 4, 4));
+    for i in 0..n {
+        let m00 = table.elements[0].values[i].exp();
+        vals[[i, 0, 0]] = m00;
+        for (k, t) in table.elements.iter().enumerate().skip(1) {
+            vals[[i, k / 4, k % 4]] = m00 * t.values[i];
+        }
+    }
+    Ok((Array1::from(theta).into_pyarray(py), vals.into_pyarray(py), secs, err))
+}
+
 /// Coherent-backscatter decorrelation factor gamma for a material and directions.
 #[pyfunction]
 fn cbe_gamma(material: &PyMaterial, wi: [f64; 3], wo: [f64; 3]) -> f64 {
@@ -392,6 +432,7 @@ fn cbe_gamma(material: &PyMaterial, wi: [f64; 3], wo: [f64; 3]) -> f64 {
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(double_jones, m)?)?;
     m.add_function(wrap_pyfunction!(cbe_gamma, m)?)?;
+    m.add_function(wrap_pyfunction!(monostatic_table, m)?)?;
     m.add_class::<PyMaterial>()?;
     m.add_function(wrap_pyfunction!(brdf_eval, m)?)?;
     m.add_function(wrap_pyfunction!(specular, m)?)?;

@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 pub mod brdf;
 mod polarimetry;
 mod seed;
+mod reference;
 
 pyo3::create_exception!(
     pprender,
@@ -26,5 +27,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     brdf::register(m)?;
     polarimetry::register(m)?;
     seed::register(m)?;
+    reference::register(m)?;
     Ok(())
 }

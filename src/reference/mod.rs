@@ -1,0 +1,638 @@
+//! An explicit-microsurface Monte Carlo reference for the polarized BRDF (PHYSICS.md
+//! section 6): random Gaussian height fields, triangulated and ray traced with Fresnel
+//! reflection and full polarization at every bounce, tallied per bounce order.
+//!
+//! It shares no model code with [`crate::brdf`] or [`crate::microfacet`]: only the optics
+//! conventions ([`crate::optics::fresnel::fresnel_amplitudes`], the beam frames of
+//! [`crate::optics::frames::beam_bases`] and [`crate::optics::mueller::jones_to_mueller`]).
+//! Geometric optics, incoherent: no diffraction and no coherent backscatter enhancement.
+//!
+//! # Estimator and its normalization
+//! The tile (area `A = n^2` grid units, periodic) is lit by a plane wave of irradiance
+//! `E` (power per unit area normal to the beam) from `wi`. It receives the flux
+//! `E A cos(theta_i)`; the primary rays start at uniform random horizontal positions on the
+//! plane `z = h_max + 0.001` (uniform over the tile's projected area) and travel along `-wi`, so
+//! each of the `R` rays carries `E A cos(theta_i) / R`.
+//! By the definition of the BRDF the reflected radiance is `L(wo) = f(wi, wo) E cos(theta_i)`,
+//! and the power the macro area sends into a cone `C` of half-angle `gamma` around `wo` is
+//! `Phi_C = A int_C L cos(theta) dw = A E cos(theta_i) int_C f cos(theta) dw`.
+//! Equating with the ray estimate `Phi_C = (E A cos(theta_i) / R) sum_{rays in C} w_r`:
+//!
+//! `f_hat = sum_{rays in C} w_r / (R * Omega_p)`, `Omega_p = int_C cos(theta) dw = pi sin^2(gamma) cos(theta_o)`
+//!
+//! (`int_C w dw = pi sin^2(gamma) wo` for a spherical cap; the cap must lie above the
+//! horizon). `cos(theta_i)` cancels. `f_hat` is exactly the `cos(theta)`-weighted mean of `f`
+//! over the cone; the remaining bias is the curvature of `f` across the cone, O(gamma^2).
+//! Using the plain solid angle `2 pi (1 - cos gamma)` instead of `Omega_p / cos(theta_o)`
+//! would add a bias of `gamma^2 / 4`. With Mueller matrices `w_r` is the Mueller matrix of
+//! the ray's Jones matrix (its `M00` is the ray's unpolarized throughput).
+//!
+//! # Frames at escape
+//! The output Stokes basis is the frame's basis `(x_o, y_o)` of the cone axis `wo`
+//! (`beam_bases(frame, wi, wo)`), carried to each escaping ray's own direction `k` by the
+//! minimal rotation taking `wo` to `k` (parallel transport along the great circle). The
+//! ray's field is transverse to `k`, so projecting onto the transported basis loses no
+//! power (projecting onto `wo`'s transverse plane would lose `O(gamma^2)`), and the basis
+//! varies smoothly across the cone even where the frame's own basis is singular (the `sp`
+//! frame at `wo = n`, whose azimuth is undefined at the pole). As `gamma -> 0` it tends to
+//! `beam_bases(frame, wi, wo)`.
+//!
+//! # Errors
+//! Tallies are split into `batches` independent batches; each batch uses its own surface
+//! realization (seed stream `[0, batch]`) and its own rays, so the standard errors (of the
+//! batch estimates' mean) include the surface-to-surface variance of a finite tile.
+
+pub mod microsurface;
+pub mod rng;
+pub mod trace;
+
+use crate::optics::frames::{beam_bases, cross, dot, Frame, V3};
+use crate::optics::fresnel::{Eta, C64};
+use crate::optics::mueller::{jones_to_mueller, Mat4};
+use crate::{Error, Result};
+use microsurface::{gaussian_height_field, HeightField, SurfaceReport};
+use rayon::prelude::*;
+use rng::Rng;
+use std::sync::Arc;
+use trace::{trace_ray, Fields, RayEnd};
+
+pub use microsurface::SlopeStats;
+
+/// Number of order bins: 1, 2 and 3+.
+pub const ORDERS: usize = 3;
+/// Rays per parallel work item (fixed, so results do not depend on the thread count).
+const CHUNK: u64 = 2048;
+
+/// The microsurface to trace.
+#[derive(Debug, Clone)]
+pub enum Surface {
+    /// A Gaussian random surface per batch (see [`microsurface`]).
+    Gaussian {
+        /// Beckmann roughness: `alpha^2 = 2 var(slope component)`.
+        alpha: f64,
+        /// Grid size `n` of the periodic `n x n` tile.
+        grid: usize,
+        /// Height correlation length in grid units (`C(r) ~ exp(-r^2 / l^2)`).
+        correlation_length: f64,
+    },
+    /// A user height field (`n x n`, `h[i * n + j] = h(x = i, y = j)`), the same in every batch.
+    Heights(Arc<HeightField>),
+}
+
+/// Parameters of one reference run.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Direction toward the transmitter (unit, `z > 0`).
+    pub wi: V3,
+    /// Detector cone axes (unit, above the horizon by more than `cone`).
+    pub wo: Vec<V3>,
+    pub eta: Eta,
+    pub surface: Surface,
+    /// Total number of primary rays (over all batches).
+    pub rays: u64,
+    /// Detector cone half-angle in radians.
+    pub cone: f64,
+    /// Maximum number of reflections followed.
+    pub max_order: u32,
+    pub frame: Frame,
+    pub seed: u64,
+    pub batches: u32,
+}
+
+/// Results of a run. Order bins `o = 0, 1, 2` are 1, 2 and 3+ reflections.
+#[derive(Debug, Clone)]
+pub struct Output {
+    /// Mueller BRDF (1/sr) per order and detector, `mueller[o * K + k]`.
+    pub mueller: Vec<Mat4>,
+    /// Standard errors of `mueller` (batch means).
+    pub stderr: Vec<Mat4>,
+    /// Number of rays tallied per order and detector, `counts[o * K + k]`.
+    pub counts: Vec<u64>,
+    /// `Omega_p = pi sin^2(cone) cos(theta_o)` per detector (sr).
+    pub projected_solid_angle: Vec<f64>,
+    /// Directional albedo (escaped unpolarized power fraction) per order.
+    pub albedo: [f64; ORDERS],
+    pub albedo_stderr: [f64; ORDERS],
+    /// Unpolarized power fraction still on the surface after `max_order` reflections.
+    pub truncated: f64,
+    pub truncated_stderr: f64,
+    /// Fraction of rays lost by the traversal (numerical failures; expected 0).
+    pub lost: f64,
+    /// One report per batch surface.
+    pub surfaces: Vec<SurfaceReport>,
+    /// Wall time of the run in seconds.
+    pub elapsed_s: f64,
+}
+
+/// Per-chunk (and per-batch) sums.
+#[derive(Debug, Clone)]
+struct Tally {
+    m: Vec<Mat4>,
+    counts: Vec<u64>,
+    albedo: [f64; ORDERS],
+    truncated: f64,
+    lost: u64,
+}
+
+impl Tally {
+    fn new(k: usize) -> Self {
+        Tally {
+            m: vec![[[0.0; 4]; 4]; ORDERS * k],
+            counts: vec![0; ORDERS * k],
+            albedo: [0.0; ORDERS],
+            truncated: 0.0,
+            lost: 0,
+        }
+    }
+    fn add(&mut self, o: &Tally) {
+        for (a, b) in self.m.iter_mut().zip(&o.m) {
+            a.iter_mut()
+                .flatten()
+                .zip(b.iter().flatten())
+                .for_each(|(x, y)| *x += y);
+        }
+        self.counts
+            .iter_mut()
+            .zip(&o.counts)
+            .for_each(|(a, b)| *a += b);
+        self.albedo
+            .iter_mut()
+            .zip(&o.albedo)
+            .for_each(|(a, b)| *a += b);
+        self.truncated += o.truncated;
+        self.lost += o.lost;
+    }
+}
+
+/// A detector: cone axis and the precomputed bases.
+#[derive(Debug, Clone, Copy)]
+struct Detector {
+    wo: V3,
+    /// Coefficients of `x_in`, `y_in` on the incident basis `(e1, e2)` the rays carry.
+    a: [f64; 2],
+    b: [f64; 2],
+    x_out: V3,
+    cos_cone: f64,
+}
+
+impl Detector {
+    /// Mueller matrix of an escaped ray (direction `k`, fields `e` of `e1, e2`).
+    #[inline]
+    fn mueller(&self, k: V3, e: &Fields) -> Mat4 {
+        let px: [C64; 3] = std::array::from_fn(|i| e[0][i] * self.a[0] + e[1][i] * self.a[1]);
+        let py: [C64; 3] = std::array::from_fn(|i| e[0][i] * self.b[0] + e[1][i] * self.b[1]);
+        // Parallel transport of x_out from wo to k: R = I + [w]x + [w]x^2 / (1 + c).
+        let w = cross(self.wo, k);
+        let c = dot(self.wo, k);
+        let wx = cross(w, self.x_out);
+        let wwx = cross(w, wx);
+        let mut x: V3 = std::array::from_fn(|i| self.x_out[i] + wx[i] + wwx[i] / (1.0 + c));
+        let xk = dot(x, k);
+        x.iter_mut().zip(k).for_each(|(xi, ki)| *xi -= xk * ki);
+        let l = dot(x, x).sqrt();
+        x.iter_mut().for_each(|xi| *xi /= l);
+        let y = cross(k, x);
+        let proj = |u: V3, f: &[C64; 3]| f[0] * u[0] + f[1] * u[1] + f[2] * u[2];
+        jones_to_mueller(&[[proj(x, &px), proj(x, &py)], [proj(y, &px), proj(y, &py)]])
+    }
+}
+
+/// Validate a direction (unit within 1e-6, finite).
+fn unit(v: V3, name: &'static str) -> Result<V3> {
+    if !v.iter().all(|x| x.is_finite()) {
+        return Err(Error::InvalidDirection {
+            name,
+            reason: format!("{v:?} is not finite"),
+        });
+    }
+    let l = dot(v, v).sqrt();
+    if (l - 1.0).abs() > 1e-6 {
+        return Err(Error::InvalidDirection {
+            name,
+            reason: format!("{v:?} has length {l}; must be a unit vector"),
+        });
+    }
+    Ok([v[0] / l, v[1] / l, v[2] / l])
+}
+
+/// Check every parameter, naming the offending one.
+fn validate(cfg: &Config) -> Result<()> {
+    let wi = unit(cfg.wi, "wi")?;
+    if wi[2] <= 1e-6 {
+        return Err(Error::InvalidDirection {
+            name: "wi",
+            reason: format!("{:?} must be above the horizon (z > 1e-6)", cfg.wi),
+        });
+    }
+    if !(cfg.cone.is_finite() && cfg.cone > 0.0 && cfg.cone <= std::f64::consts::FRAC_PI_4) {
+        return Err(Error::param(
+            "cone",
+            cfg.cone,
+            "half-angle must be in (0, pi/4] radians",
+        ));
+    }
+    if cfg.wo.is_empty() {
+        return Err(Error::Shape("wo must hold at least one direction".into()));
+    }
+    for (i, &w) in cfg.wo.iter().enumerate() {
+        let w = unit(w, "wo")?;
+        if w[2] <= cfg.cone.sin() {
+            return Err(Error::InvalidDirection {
+                name: "wo",
+                reason: format!(
+                    "element {i} = {w:?}: the detector cone of half-angle {} reaches the horizon (need z > sin(cone) = {})",
+                    cfg.cone,
+                    cfg.cone.sin()
+                ),
+            });
+        }
+    }
+    if let Eta::Complex(e) = cfg.eta {
+        if !(e.re.is_finite() && e.im.is_finite() && e.re > 0.0 && e.im >= 0.0) {
+            return Err(Error::param(
+                "eta",
+                e,
+                "must be n + ik with n > 0, k >= 0 finite (or inf for a perfect conductor)",
+            ));
+        }
+    }
+    if !(1..=1000).contains(&cfg.max_order) {
+        return Err(Error::param(
+            "max_order",
+            cfg.max_order,
+            "must be in [1, 1000]",
+        ));
+    }
+    if !(2..=100_000).contains(&cfg.batches) {
+        return Err(Error::param(
+            "batches",
+            cfg.batches,
+            "must be in [2, 100000] (standard errors need 2)",
+        ));
+    }
+    if cfg.rays < cfg.batches as u64 || cfg.rays > 1u64 << 40 {
+        return Err(Error::param(
+            "rays",
+            cfg.rays,
+            format!("must be in [batches = {}, 2^40]", cfg.batches),
+        ));
+    }
+    if let Surface::Gaussian {
+        alpha,
+        grid,
+        correlation_length,
+    } = cfg.surface
+    {
+        microsurface::check_gaussian(alpha, grid, correlation_length)?;
+    }
+    Ok(())
+}
+
+/// Mean and standard error of the mean of batch estimates.
+fn mean_se(x: &[f64]) -> (f64, f64) {
+    let b = x.len() as f64;
+    let m = x.iter().sum::<f64>() / b;
+    let v = x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (b - 1.0);
+    (m, (v / b).sqrt())
+}
+
+/// The surface of batch `batch` (Gaussian: seed stream `[0, batch]`).
+pub fn batch_surface(
+    surface: &Surface,
+    seed: u64,
+    batch: u32,
+) -> Result<(Arc<HeightField>, SurfaceReport)> {
+    match surface {
+        Surface::Gaussian {
+            alpha,
+            grid,
+            correlation_length,
+        } => {
+            let (f, rep) = gaussian_height_field(
+                *alpha,
+                *grid,
+                *correlation_length,
+                seed,
+                &[0, batch as u64],
+            )?;
+            Ok((Arc::new(f), rep))
+        }
+        Surface::Heights(f) => Ok((
+            f.clone(),
+            SurfaceReport {
+                stats: f.slope_stats(),
+                alpha_unscaled_ratio: f64::NAN,
+                scale: 1.0,
+            },
+        )),
+    }
+}
+
+/// Run the reference (module docs). Parallel over rays (rayon); deterministic in `seed`
+/// whatever the number of threads.
+pub fn run(cfg: &Config) -> Result<Output> {
+    validate(cfg)?;
+    let start = std::time::Instant::now();
+    let wi = unit(cfg.wi, "wi")?;
+    let wo: Vec<V3> = cfg
+        .wo
+        .iter()
+        .map(|&w| unit(w, "wo"))
+        .collect::<Result<_>>()?;
+    let nk = wo.len();
+    // Incident basis carried by the rays: that of the first detector's frame.
+    let (e1, e2, _, _) = beam_bases(cfg.frame, wi, wo[0]);
+    let detectors: Vec<Detector> = wo
+        .iter()
+        .map(|&w| {
+            let (x_in, y_in, x_out, _) = beam_bases(cfg.frame, wi, w);
+            Detector {
+                wo: w,
+                a: [dot(x_in, e1), dot(x_in, e2)],
+                b: [dot(y_in, e1), dot(y_in, e2)],
+                x_out,
+                cos_cone: cfg.cone.cos(),
+            }
+        })
+        .collect();
+    let omega_p: Vec<f64> = wo
+        .iter()
+        .map(|w| std::f64::consts::PI * cfg.cone.sin().powi(2) * w[2])
+        .collect();
+    let e0: Fields = [e1, e2].map(|v| v.map(|x| C64::new(x, 0.0)));
+
+    let nb = cfg.batches as u64;
+    let mut batch_tallies = Vec::with_capacity(cfg.batches as usize);
+    let mut batch_rays = Vec::with_capacity(cfg.batches as usize);
+    let mut surfaces = Vec::with_capacity(cfg.batches as usize);
+    for b in 0..cfg.batches {
+        let (field, rep) = batch_surface(&cfg.surface, cfg.seed, b)?;
+        surfaces.push(rep);
+        let rays_b = cfg.rays / nb + u64::from((b as u64) < cfg.rays % nb);
+        let n_chunks = rays_b.div_ceil(CHUNK);
+        let max_cells = 64 * field.n + 4096;
+        let period = field.n as f64;
+        // Any start plane above the surface gives the same hits; a close one keeps
+        // grazing rays short.
+        let z0 = field.h_max + 1e-3;
+        let chunks: Vec<Tally> = (0..n_chunks)
+            .into_par_iter()
+            .map(|c| {
+                let mut rng = Rng::new(cfg.seed, &[1, b as u64, c]);
+                let mut t = Tally::new(nk);
+                let count = CHUNK.min(rays_b - c * CHUNK);
+                for _ in 0..count {
+                    let start = [rng.uniform() * period, rng.uniform() * period, z0];
+                    match trace_ray(&field, cfg.eta, wi, start, e0, cfg.max_order, max_cells) {
+                        RayEnd::Escaped { order, k, e } => {
+                            let bin = (order.min(3) - 1) as usize;
+                            let p: f64 = e.iter().flatten().map(|z| z.norm_sqr()).sum();
+                            t.albedo[bin] += 0.5 * p;
+                            for (kk, det) in detectors.iter().enumerate() {
+                                if dot(k, det.wo) >= det.cos_cone {
+                                    let m = det.mueller(k, &e);
+                                    let acc = &mut t.m[bin * nk + kk];
+                                    acc.iter_mut()
+                                        .flatten()
+                                        .zip(m.iter().flatten())
+                                        .for_each(|(a, x)| *a += x);
+                                    t.counts[bin * nk + kk] += 1;
+                                }
+                            }
+                        }
+                        RayEnd::Truncated { e } => {
+                            t.truncated +=
+                                0.5 * e.iter().flatten().map(|z| z.norm_sqr()).sum::<f64>();
+                        }
+                        RayEnd::Lost => t.lost += 1,
+                    }
+                }
+                t
+            })
+            .collect();
+        let mut tb = Tally::new(nk);
+        chunks.iter().for_each(|c| tb.add(c));
+        batch_tallies.push(tb);
+        batch_rays.push(rays_b as f64);
+    }
+
+    // Pooled means; standard errors from the spread of the batch estimates.
+    let total = cfg.rays as f64;
+    let mut mueller = vec![[[0.0; 4]; 4]; ORDERS * nk];
+    let mut stderr = vec![[[0.0; 4]; 4]; ORDERS * nk];
+    let mut counts = vec![0u64; ORDERS * nk];
+    for idx in 0..ORDERS * nk {
+        let k = idx % nk;
+        counts[idx] = batch_tallies.iter().map(|t| t.counts[idx]).sum();
+        for i in 0..4 {
+            for j in 0..4 {
+                let est: Vec<f64> = batch_tallies
+                    .iter()
+                    .zip(&batch_rays)
+                    .map(|(t, r)| t.m[idx][i][j] / (r * omega_p[k]))
+                    .collect();
+                let pooled: f64 = batch_tallies.iter().map(|t| t.m[idx][i][j]).sum::<f64>()
+                    / (total * omega_p[k]);
+                mueller[idx][i][j] = pooled;
+                stderr[idx][i][j] = mean_se(&est).1;
+            }
+        }
+    }
+    let mut albedo = [0.0; ORDERS];
+    let mut albedo_stderr = [0.0; ORDERS];
+    for o in 0..ORDERS {
+        let est: Vec<f64> = batch_tallies
+            .iter()
+            .zip(&batch_rays)
+            .map(|(t, r)| t.albedo[o] / r)
+            .collect();
+        albedo[o] = batch_tallies.iter().map(|t| t.albedo[o]).sum::<f64>() / total;
+        albedo_stderr[o] = mean_se(&est).1;
+    }
+    let est: Vec<f64> = batch_tallies
+        .iter()
+        .zip(&batch_rays)
+        .map(|(t, r)| t.truncated / r)
+        .collect();
+    let truncated = batch_tallies.iter().map(|t| t.truncated).sum::<f64>() / total;
+    let lost = batch_tallies.iter().map(|t| t.lost).sum::<u64>() as f64 / total;
+    Ok(Output {
+        mueller,
+        stderr,
+        counts,
+        projected_solid_angle: omega_p,
+        albedo,
+        albedo_stderr,
+        truncated,
+        truncated_stderr: mean_se(&est).1,
+        lost,
+        surfaces,
+        elapsed_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::frames::normalize;
+    use crate::optics::fresnel::fresnel_amplitudes;
+
+    fn dir(theta_deg: f64, phi_deg: f64) -> V3 {
+        let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
+        [t.sin() * p.cos(), t.sin() * p.sin(), t.cos()]
+    }
+
+    fn gaussian(alpha: f64) -> Surface {
+        Surface::Gaussian {
+            alpha,
+            grid: 128,
+            correlation_length: 8.0,
+        }
+    }
+
+    fn cfg(wi: V3, wo: Vec<V3>, eta: Eta, surface: Surface, rays: u64) -> Config {
+        Config {
+            wi,
+            wo,
+            eta,
+            surface,
+            rays,
+            cone: 0.05,
+            max_order: 10,
+            frame: Frame::Sp,
+            seed: 1,
+            batches: 4,
+        }
+    }
+
+    #[test]
+    fn nearly_flat_surface_is_the_fresnel_mirror() {
+        let wi = dir(40.0, 30.0);
+        let wo = [-wi[0], -wi[1], wi[2]];
+        let eta = Eta::new(1.5, 0.3);
+        let out = run(&cfg(
+            wi,
+            vec![wo, dir(10.0, 0.0)],
+            eta,
+            gaussian(1e-8),
+            4000,
+        ))
+        .unwrap();
+        let (rs, rp) = fresnel_amplitudes(wi[2], eta);
+        // Sp frame, specular: Jones diag(rs, rp) up to the sign convention of the frames.
+        let want = jones_to_mueller(&[[rs, C64::new(0.0, 0.0)], [C64::new(0.0, 0.0), rp]]);
+        let got = crate::optics::mueller::scale(&out.mueller[0], out.projected_solid_angle[0]);
+        for i in 0..4 {
+            for j in 0..4 {
+                assert!(
+                    (got[i][j] - want[i][j]).abs() < 1e-9,
+                    "{i}{j}: {got:?} vs {want:?}"
+                );
+            }
+        }
+        assert_eq!(out.counts[0], 4000);
+        assert_eq!(out.counts[1], 0);
+        assert!(out.albedo[1] == 0.0 && out.albedo[2] == 0.0 && out.lost == 0.0);
+    }
+
+    #[test]
+    fn perfect_conductor_conserves_energy() {
+        let out = run(&cfg(
+            dir(60.0, 0.0),
+            vec![dir(0.0, 0.0)],
+            Eta::PerfectConductor,
+            gaussian(0.8),
+            20_000,
+        ))
+        .unwrap();
+        let total: f64 = out.albedo.iter().sum::<f64>() + out.truncated;
+        assert_eq!(out.lost, 0.0);
+        assert!((total - 1.0).abs() < 1e-12, "{out:?}");
+        assert!(
+            out.albedo[1] > 0.05,
+            "rough surface has double bounces: {:?}",
+            out.albedo
+        );
+    }
+
+    #[test]
+    fn v_groove_is_a_dihedral() {
+        // 90-degree grooves along y (period 2 cells, slopes +-1). At normal incidence every
+        // ray reflects twice and returns along wi; tilted in the x-z plane, the rays that
+        // hit high on a face leave over the opposite (finite) wall after one reflection,
+        // and the others still reflect twice and return along wi.
+        let n = 16;
+        let h: Vec<f64> = (0..n * n).map(|k| ((k / n) % 2) as f64).collect();
+        let f = Arc::new(HeightField::new(n, h).unwrap());
+        let eta = Eta::new(0.8, 2.5);
+        for tilt in [0.0f64, 20.0] {
+            let wi = dir(tilt, 0.0);
+            let out = run(&cfg(wi, vec![wi], eta, Surface::Heights(f.clone()), 2000)).unwrap();
+            if tilt == 0.0 {
+                assert_eq!(out.counts[1], 2000, "{out:?}");
+            }
+            assert_eq!(out.counts[0] + out.counts[2], 0);
+            let (t1, t2) = ((45.0 - tilt).to_radians(), (45.0 + tilt).to_radians());
+            let (rs1, rp1) = fresnel_amplitudes(t1.cos(), eta);
+            let (rs2, rp2) = fresnel_amplitudes(t2.cos(), eta);
+            let z = C64::new(0.0, 0.0);
+            let want = jones_to_mueller(&[[rs1 * rs2, z], [z, rp1 * rp2]]);
+            // Mean Mueller matrix of a backscattered ray.
+            let per_ray = out.projected_solid_angle[0] * 2000.0 / out.counts[1] as f64;
+            let got = crate::optics::mueller::scale(&out.mueller[1], per_ray);
+            for i in 0..4 {
+                for j in 0..4 {
+                    assert!(
+                        (got[i][j] - want[i][j]).abs() < 1e-12,
+                        "tilt {tilt} {i}{j}: {got:?} vs {want:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn results_do_not_depend_on_thread_count() {
+        let c = cfg(
+            dir(30.0, 0.0),
+            vec![dir(30.0, 0.0), normalize([0.2, 0.1, 0.9])],
+            Eta::new(1.2, 1.0),
+            gaussian(0.4),
+            5000,
+        );
+        let a = run(&c).unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let b = pool.install(|| run(&c).unwrap());
+        assert_eq!(a.mueller, b.mueller);
+        assert_eq!(a.albedo, b.albedo);
+    }
+
+    #[test]
+    fn errors_name_the_parameter() {
+        let base = cfg(
+            dir(30.0, 0.0),
+            vec![dir(30.0, 0.0)],
+            Eta::new(1.5, 0.0),
+            gaussian(0.3),
+            100,
+        );
+        let mut c = base.clone();
+        c.cone = 0.0;
+        assert!(run(&c).unwrap_err().to_string().contains("cone"));
+        let mut c = base.clone();
+        c.wo = vec![dir(89.0, 0.0)];
+        assert!(run(&c).unwrap_err().to_string().contains("wo"));
+        let mut c = base.clone();
+        c.batches = 1;
+        assert!(run(&c).unwrap_err().to_string().contains("batches"));
+        let mut c = base.clone();
+        c.max_order = 0;
+        assert!(run(&c).unwrap_err().to_string().contains("max_order"));
+        let mut c = base;
+        c.wi = [0.0, 0.0, 2.0];
+        assert!(run(&c).unwrap_err().to_string().contains("wi"));
+    }
+}
