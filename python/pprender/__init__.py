@@ -16,12 +16,24 @@ Conventions (the full statement is at the top of ``src/optics/mod.rs`` and in th
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import _core
 from ._core import Error, Material, __version__
 
-__all__ = ["Error", "Material", "__version__", "brdf", "albedo", "specular", "white_furnace"]
+__all__ = [
+    "Error",
+    "Material",
+    "MonostaticTable",
+    "__version__",
+    "albedo",
+    "brdf",
+    "monostatic_table",
+    "specular",
+    "white_furnace",
+]
 
 
 def _directions(x: object, name: str) -> np.ndarray:
@@ -108,3 +120,33 @@ def white_furnace(distribution: str = "blinn_phong", **kwargs: object) -> Materi
     """A material with ``F = 1`` (a perfect conductor, ``eta=inf``): the white-furnace
     test material. Keyword arguments are passed to :class:`Material`."""
     return Material(distribution, eta=complex(np.inf, 0.0), **kwargs)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class MonostaticTable:
+    """The monostatic double-bounce Mueller BRDF of a material against incidence angle.
+
+    ``theta`` (n,) radians (nodes uniform in the material's table coordinate, densest near
+    normal incidence on the lobe's scale), ``mueller`` (n, 4, 4) in 1/sr, sp frame
+    (plane of incidence), coherent backscatter included as configured on the material.
+    The single term at backscatter and the multiple term are closed forms and are not in
+    the table. ``max_error``: largest error of the interpolated table at the midpoints
+    between nodes against the material's own evaluation, relative to the total monostatic
+    M00 there (None if not measured). ``build_seconds``: time to build it.
+    """
+
+    theta: np.ndarray
+    mueller: np.ndarray
+    build_seconds: float
+    max_error: float | None
+
+
+def monostatic_table(
+    material: Material, nodes: int = 64, double_order: int = 48, measure: bool = True
+) -> MonostaticTable:
+    """Tabulate the monostatic double-bounce BRDF of ``material`` at ``nodes + 1`` angles,
+    with the double-bounce quadrature at ``double_order`` (see :class:`MonostaticTable`).
+    Interpolation: ``ln M00`` (bounded by its neighbours) and ``M_ij / M00`` by Catmull-Rom
+    in the table coordinate, as in ``src/brdf/table.rs``."""
+    theta, mueller, secs, err = _core.monostatic_table(material, int(nodes), int(double_order), bool(measure))
+    return MonostaticTable(theta=theta, mueller=mueller, build_seconds=secs, max_error=err)
