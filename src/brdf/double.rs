@@ -297,7 +297,16 @@ pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, c
     let use_cbe = gamma > 1e-6;
     let dist = mat.spec.distribution;
     let f = [-1.0, 1.0];
-    let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| push_breaks(wi, cp, sp, &[0.0, wo[2]], out);
+    // The singular point h1 = normalize(wi + wo) (d = wo): its polar angle is a breakpoint
+    // for every phi (lines passing near it are resolved from both sides).
+    let hs_full = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+    let theta_s = hs_full[2].clamp(-1.0, 1.0).acos();
+    let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| {
+        push_breaks(wi, cp, sp, &[0.0, wo[2]], out);
+        if theta_s > 0.0 && theta_s < 0.5 * PI {
+            out.push(theta_s);
+        }
+    };
     let mut body = |h1: V3, wgt: f64| {
         let Some((j, d, h2)) = double_jones(mat, wi, wo, h1, frame) else { return };
         let d2 = dist.d(h2[2], h2[0] * h2[0] + h2[1] * h2[1]);

@@ -308,7 +308,9 @@ fn brdf_eval<'py>(
             }
             Ok(())
         };
-        if n >= PAR_MIN {
+        // A double-bounce evaluation costs milliseconds: parallel from two pairs then.
+        let par_min = if mat.spec.terms.double { 2 } else { PAR_MIN };
+        if n >= par_min {
             buf.par_chunks_mut(16).enumerate().try_for_each(f)
         } else {
             buf.chunks_mut(16).enumerate().try_for_each(f)
