@@ -59,6 +59,7 @@ bench: setup
 
 docs: setup
 	$(PY) scripts/seed_table.py
+	$(PY) scripts/compare_microsurface.py
 
 clean:
 	rm -rf target $(STAMP) $(VENV)
