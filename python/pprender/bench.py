@@ -509,10 +509,16 @@ def main(n: int = 1_000_000, repeats: int = 5, write: bool | str | os.PathLike[s
     prof = profile(mats, n, repeats, mits) if with_profile else None
     info["load_end"] = load_average()
     report = render(timings, reference, kernel_only, info, prof)
+    return emit_report(report, write, "benchmark.md", quiet)
+
+
+def emit_report(report: str, write: bool | str | os.PathLike[str], name: str, quiet: bool) -> str:
+    """Print a benchmark report and, when ``write`` is true (or a path), store it: by
+    default as ``docs/<name>`` of the source checkout (or of the working directory)."""
     if not quiet:
         print(report, end="")
     if write:
-        path = _default_output() if write is True else Path(write)
+        path = default_output(name) if write is True else Path(write)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(report)
         if not quiet:
@@ -520,11 +526,11 @@ def main(n: int = 1_000_000, repeats: int = 5, write: bool | str | os.PathLike[s
     return report
 
 
-def _default_output() -> Path:
+def default_output(name: str) -> Path:
     root = Path(__file__).resolve().parents[2]
     if (root / "Cargo.toml").exists() and (root / "pyproject.toml").exists():
-        return root / "docs" / "benchmark.md"
-    return Path.cwd() / "docs" / "benchmark.md"
+        return root / "docs" / name
+    return Path.cwd() / "docs" / name
 
 
 def _cli(argv: list[str] | None = None) -> None:

@@ -49,7 +49,7 @@ import numpy as np
 
 import pprender
 from pprender import _core
-from pprender.bench import cpu_model, load_average, threads_available, uniform_hemisphere
+from pprender.bench import cpu_model, emit_report, load_average, threads_available, uniform_hemisphere
 
 SEED = 2024
 ORDERS = (16, 24, 32, 48, 64, 96, 128, 192)
@@ -509,22 +509,7 @@ def main(repeats: int = 3, target_time: float = 0.15, seed: int = SEED,
     info["load_end"] = load_average()
     info["wall"] = time.perf_counter() - t_start
     report = render(sweeps, tabs, info)
-    if not quiet:
-        print(report, end="")
-    if write:
-        path = _default_output() if write is True else Path(write)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(report)
-        if not quiet:
-            print(f"(written to {path})")
-    return report
-
-
-def _default_output() -> Path:
-    root = Path(__file__).resolve().parents[2]
-    if (root / "Cargo.toml").exists() and (root / "pyproject.toml").exists():
-        return root / "docs" / "double-bounce-benchmark.md"
-    return Path.cwd() / "docs" / "double-bounce-benchmark.md"
+    return emit_report(report, write, "double-bounce-benchmark.md", quiet)
 
 
 def _cli(argv: list[str] | None = None) -> None:
