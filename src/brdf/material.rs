@@ -244,23 +244,19 @@ impl Material {
                 masking::aps_excess(&dist, t)
             }));
         }
+        // The escape and albedo tables normalize the double, multiple and diffuse terms
+        // (to 1e-5); with masking="exact" they are filled with the tabulated masking (error
+        // below 1e-8 in P) instead of a quadrature inside every node, which would take
+        // minutes. The single term itself keeps the exact masking.
+        let mut builder = mat.clone();
+        if exact {
+            builder.spec.masking = MaskingEval::Table;
+        }
         if mat.spec.terms.double {
-            let mut b = mat.clone();
-            if exact {
-                b.spec.masking = MaskingEval::Table;
-            }
-            mat.s_white = Some(b.escape_table(false));
-            mat.s_fresnel = Some(b.escape_table(true));
+            builder.s_white = Some(builder.escape_table(false));
+            builder.s_fresnel = Some(builder.escape_table(true));
         }
         if needs_albedo {
-            // The albedo tables normalize the multiple/diffuse terms (to 1e-5); with
-            // masking="exact" they are filled with the tabulated masking (error below 1e-8
-            // in P) instead of a quadrature inside every node, which would take minutes.
-            // The single term itself keeps the exact masking.
-            let mut builder = mat.clone();
-            if exact {
-                builder.spec.masking = MaskingEval::Table;
-            }
             let white = builder.albedo_table(false, None);
             let f_avg = average_reflectance(mat.spec.eta);
             let e_avg = white.e_avg;
@@ -274,10 +270,12 @@ impl Material {
                 };
                 builder.e_spec = Some(builder.albedo_table(true, with_ms.as_ref()));
             }
-            mat.f_ms = builder.f_ms;
-            mat.e_white = builder.e_white;
-            mat.e_spec = builder.e_spec;
         }
+        mat.s_white = builder.s_white;
+        mat.s_fresnel = builder.s_fresnel;
+        mat.f_ms = builder.f_ms;
+        mat.e_white = builder.e_white;
+        mat.e_spec = builder.e_spec;
         Ok(mat)
     }
 
@@ -285,13 +283,13 @@ impl Material {
     /// term's share `(1 - E_white) F_ms` when `ms` is given.
     fn albedo_table(&self, fresnel: bool, ms: Option<&AlbedoTable>) -> AlbedoTable {
         let f_ms = self.f_ms;
-        // With the double bounce on, E includes its albedo: the escape after the second
-        // bounce S(v) is tabulated over the polar angle of v in [0, pi] first.
-        let s_table = if self.spec.terms.double { Some(self.escape_table(fresnel)) } else { None };
+        // With the double bounce on, E includes its albedo, through the escape tables
+        // built before this (see `new`).
+        let s_table = if fresnel { self.s_fresnel.as_ref() } else { self.s_white.as_ref() };
         let e = ZTable::build(self.spec.distribution.scale(), ALBEDO_NODES, |theta| {
             let c = theta.cos();
             let mut v = super::albedo::single_albedo(self, c, fresnel, ALBEDO_ORDER);
-            if let Some(st) = &s_table {
+            if let Some(st) = s_table {
                 let wi = [theta.sin(), 0.0, c];
                 v += super::double::double_albedo(self, wi, fresnel, DOUBLE_TABLE_ORDER, &|u| eval_escape(st, u));
             }
