@@ -116,13 +116,22 @@ mod tests {
     use crate::optics::fresnel::Eta;
 
     fn furnace(distribution: Distribution, shadowing: Shadowing) -> Material {
-        Material::new(MaterialSpec { shadowing, ..MaterialSpec::new(distribution, Eta::PerfectConductor) }).unwrap()
+        Material::new(MaterialSpec {
+            shadowing,
+            ..MaterialSpec::new(distribution, Eta::PerfectConductor)
+        })
+        .unwrap()
     }
 
     #[test]
     fn white_furnace_with_double() {
         let spec = MaterialSpec {
-            terms: Terms { single: true, double: true, multiple: true, diffuse: false },
+            terms: Terms {
+                single: true,
+                double: true,
+                multiple: true,
+                diffuse: false,
+            },
             ..MaterialSpec::new(Distribution::Beckmann { alpha: 0.5 }, Eta::PerfectConductor)
         };
         let mat = Material::new(spec).unwrap();

@@ -43,7 +43,8 @@
 //! `(lambda / l)^2` and is left out of the energy bookkeeping.
 
 use super::material::Material;
-use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, Frame, V3};
+use super::single::facet_sp_basis;
+use crate::optics::frames::{beam_bases, dot, neg, normalize, Frame, V3};
 use crate::optics::fresnel::{fresnel_amplitudes, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 use std::f64::consts::PI;
@@ -53,35 +54,40 @@ type CV3 = [C64; 3];
 
 /// Apply the polarization ray-tracing matrix of a reflection off facet `h` (incident
 /// propagation `k_in`, reflected `k_out`) to the field `e`:
-/// `rs s (s.e) + rp p_out (p_in.e)`, `s = normalize(k_in x h)` (any vector normal to
-/// `k_in` at normal incidence on the facet, where the result does not depend on it).
+/// `rs s (s.e) + rp p_out (p_in.e)` on the basis of [`facet_sp_basis`] (`perp`: a unit
+/// vector normal to `k_in`, used at normal incidence on the facet).
 #[inline]
-fn reflect_field(e: CV3, k_in: V3, k_out: V3, h: V3, rs: C64, rp: C64, fallback: V3) -> CV3 {
-    let c = cross(k_in, h);
-    let s = if dot(c, c) > 1e-24 {
-        normalize(c)
-    } else {
-        // a unit vector normal to k_in
-        let f = cross(k_in, fallback);
-        if dot(f, f) > 1e-24 { normalize(f) } else { normalize(cross(k_in, [1.0, 0.0, 0.0])) }
-    };
-    let p_in = cross(k_in, s);
-    let p_out = cross(k_out, s);
+fn reflect_field(e: CV3, k_in: V3, k_out: V3, h: V3, rs: C64, rp: C64, perp: V3) -> CV3 {
+    let (s, p_in, p_out) = facet_sp_basis(k_in, k_out, h, perp);
     let es = s[0] * e[0] + s[1] * e[1] + s[2] * e[2];
     let ep = p_in[0] * e[0] + p_in[1] * e[1] + p_in[2] * e[2];
     let (a, b) = (rs * es, rp * ep);
-    [s[0] * a + p_out[0] * b, s[1] * a + p_out[1] * b, s[2] * a + p_out[2] * b]
+    [
+        s[0] * a + p_out[0] * b,
+        s[1] * a + p_out[1] * b,
+        s[2] * a + p_out[2] * b,
+    ]
 }
 
 /// Jones matrix (beam frames of `frame`) of the double reflection `-wi -> h1 -> d -> h2 -> wo`.
 /// Returns `None` when the path does not exist (`h2` below the horizon or a facet seen from
 /// behind).
-pub fn double_jones(mat: &Material, wi: V3, wo: V3, h1: V3, frame: Frame) -> Option<(Jones, V3, V3)> {
+pub fn double_jones(
+    mat: &Material,
+    wi: V3,
+    wo: V3,
+    h1: V3,
+    frame: Frame,
+) -> Option<(Jones, V3, V3)> {
     let wi_h1 = dot(wi, h1);
     if wi_h1 <= 0.0 || h1[2] <= 0.0 {
         return None;
     }
-    let d = [2.0 * wi_h1 * h1[0] - wi[0], 2.0 * wi_h1 * h1[1] - wi[1], 2.0 * wi_h1 * h1[2] - wi[2]];
+    let d = [
+        2.0 * wi_h1 * h1[0] - wi[0],
+        2.0 * wi_h1 * h1[1] - wi[1],
+        2.0 * wi_h1 * h1[2] - wi[2],
+    ];
     let hs = [wo[0] - d[0], wo[1] - d[1], wo[2] - d[2]];
     let l2 = dot(hs, hs);
     if l2 <= 1e-300 {
@@ -101,8 +107,13 @@ pub fn double_jones(mat: &Material, wi: V3, wo: V3, h1: V3, frame: Frame) -> Opt
     let k_in = neg(wi);
     let mut j = [[C64::new(0.0, 0.0); 2]; 2];
     for (b, e_in) in [x_in, y_in].into_iter().enumerate() {
-        let e0 = [C64::new(e_in[0], 0.0), C64::new(e_in[1], 0.0), C64::new(e_in[2], 0.0)];
+        let e0 = [
+            C64::new(e_in[0], 0.0),
+            C64::new(e_in[1], 0.0),
+            C64::new(e_in[2], 0.0),
+        ];
         let e1 = reflect_field(e0, k_in, d, h1, rs1, rp1, x_in);
+        // at normal incidence on h2 the ray goes straight back (wo = -d), so x_out is normal to d
         let e2 = reflect_field(e1, d, wo, h2, rs2, rp2, x_out);
         for (a, ax) in [x_out, y_out].into_iter().enumerate() {
             j[a][b] = e2[0] * ax[0] + e2[1] * ax[1] + e2[2] * ax[2];
@@ -129,7 +140,8 @@ pub(crate) fn blocked_over_n(mat: &Material, a: V3, b: V3, correlated: bool) -> 
     let f = if !correlated || mat.correlation == crate::microfacet::Correlation::None {
         0.0
     } else if sa > 0.0 && sb > 0.0 {
-        mat.correlation.f_from_cos(((a[0] * b[0] + a[1] * b[1]) / (sa * sb)).clamp(-1.0, 1.0))
+        mat.correlation
+            .f_from_cos(((a[0] * b[0] + a[1] * b[1]) / (sa * sb)).clamp(-1.0, 1.0))
     } else {
         1.0
     };
@@ -183,7 +195,11 @@ fn interference(j: &Jones, jr: &Jones) -> Mat4 {
             s[a][b] += jr[a][b];
         }
     }
-    let (m, m1, m2) = (jones_to_mueller(&s), jones_to_mueller(j), jones_to_mueller(jr));
+    let (m, m1, m2) = (
+        jones_to_mueller(&s),
+        jones_to_mueller(j),
+        jones_to_mueller(jr),
+    );
     let mut r = [[0.0; 4]; 4];
     for i in 0..4 {
         for k in 0..4 {
@@ -246,7 +262,8 @@ fn integrate_h(
     let phis: Vec<(f64, f64)> = (0..2)
         .flat_map(|half| {
             let prule = prule.clone();
-            (0..prule.x.len()).map(move |i| (phi0 + PI * (half as f64 + prule.x[i]), PI * prule.w[i]))
+            (0..prule.x.len())
+                .map(move |i| (phi0 + PI * (half as f64 + prule.x[i]), PI * prule.w[i]))
         })
         .collect();
     for &(phi, dphi) in &phis {
@@ -293,7 +310,11 @@ pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, c
     if wi[2] <= 0.0 || wo[2] <= 0.0 {
         return acc;
     }
-    let gamma = if cbe { cbe_gamma(mat.spec.wavelength, mat.spec.correlation_length, wi, wo) } else { 0.0 };
+    let gamma = if cbe {
+        cbe_gamma(mat.spec.wavelength, mat.spec.correlation_length, wi, wo)
+    } else {
+        0.0
+    };
     let use_cbe = gamma > 1e-6;
     let dist = mat.spec.distribution;
     let f = [-1.0, 1.0];
@@ -308,7 +329,9 @@ pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, c
         }
     };
     let mut body = |h1: V3, wgt: f64| {
-        let Some((j, d, h2)) = double_jones(mat, wi, wo, h1, frame) else { return };
+        let Some((j, d, h2)) = double_jones(mat, wi, wo, h1, frame) else {
+            return;
+        };
         let d2 = dist.d(h2[2], h2[0] * h2[0] + h2[1] * h2[1]);
         if d2 == 0.0 {
             return;
@@ -337,7 +360,11 @@ pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, c
     // The integrand has a point singularity where d = wo (h1 = normalize(wi + wo)): there
     // h2 = normalize(wo - d) has a direction-dependent limit. Its azimuth is phi0.
     let hs = [wi[0] + wo[0], wi[1] + wo[1]];
-    let phi0 = if hs[0] * hs[0] + hs[1] * hs[1] > 1e-24 { hs[1].atan2(hs[0]) } else { wi[1].atan2(wi[0]) };
+    let phi0 = if hs[0] * hs[0] + hs[1] * hs[1] > 1e-24 {
+        hs[1].atan2(hs[0])
+    } else {
+        wi[1].atan2(wi[0])
+    };
     integrate_h(mat, order, phi0, &breaks, &mut body);
     let scale = 0.25;
     for row in acc.iter_mut() {
@@ -360,7 +387,11 @@ pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -
         if vh <= 0.0 {
             return;
         }
-        let d2 = [2.0 * vh * h[0] - v[0], 2.0 * vh * h[1] - v[1], 2.0 * vh * h[2] - v[2]];
+        let d2 = [
+            2.0 * vh * h[0] - v[0],
+            2.0 * vh * h[1] - v[1],
+            2.0 * vh * h[2] - v[2],
+        ];
         if d2[2] <= 0.0 {
             return;
         }
@@ -371,7 +402,11 @@ pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -
         } else {
             d2[2] * blocked_over_n(mat, d2, v, mat.spec.double_correlated)
         };
-        let fr = if fresnel { crate::optics::fresnel::reflectance(vh.min(1.0), mat.spec.eta) } else { 1.0 };
+        let fr = if fresnel {
+            crate::optics::fresnel::reflectance(vh.min(1.0), mat.spec.eta)
+        } else {
+            1.0
+        };
         total += wgt * vh * p * fr;
     };
     integrate_h(mat, order, v[1].atan2(v[0]), &breaks, &mut body);
@@ -383,7 +418,13 @@ pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -
 /// (with the unpolarized Fresnel reflectance at both bounces when `fresnel`, an
 /// approximation that ignores the polarization coupling of the two reflections), using
 /// `s_of(-d)` for the inner integral.
-pub fn double_albedo(mat: &Material, wi: V3, fresnel: bool, order: usize, s_of: &dyn Fn(V3) -> f64) -> f64 {
+pub fn double_albedo(
+    mat: &Material,
+    wi: V3,
+    fresnel: bool,
+    order: usize,
+    s_of: &dyn Fn(V3) -> f64,
+) -> f64 {
     let mut total = 0.0;
     let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| push_breaks(wi, cp, sp, &[0.0], out);
     let mut body = |h1: V3, wgt: f64| {
@@ -391,8 +432,16 @@ pub fn double_albedo(mat: &Material, wi: V3, fresnel: bool, order: usize, s_of: 
         if wh <= 0.0 {
             return;
         }
-        let d = [2.0 * wh * h1[0] - wi[0], 2.0 * wh * h1[1] - wi[1], 2.0 * wh * h1[2] - wi[2]];
-        let fr = if fresnel { crate::optics::fresnel::reflectance(wh.min(1.0), mat.spec.eta) } else { 1.0 };
+        let d = [
+            2.0 * wh * h1[0] - wi[0],
+            2.0 * wh * h1[1] - wi[1],
+            2.0 * wh * h1[2] - wi[2],
+        ];
+        let fr = if fresnel {
+            crate::optics::fresnel::reflectance(wh.min(1.0), mat.spec.eta)
+        } else {
+            1.0
+        };
         let w = if d[2] >= 0.0 {
             blocked_over_n(mat, wi, d, mat.spec.double_correlated)
         } else {
@@ -407,7 +456,14 @@ pub fn double_albedo(mat: &Material, wi: V3, fresnel: bool, order: usize, s_of: 
 /// [`eval_double`] in the sp frame (where the coherent-backscatter reverse amplitude is
 /// derived), then expressed in `frame` by the Stokes rotations between the bases.
 pub fn eval_double_framed(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
-    let m = eval_double(mat, wi, wo, Frame::Sp, mat.spec.double_order, mat.spec.coherent_backscatter);
+    let m = eval_double(
+        mat,
+        wi,
+        wo,
+        Frame::Sp,
+        mat.spec.double_order,
+        mat.spec.coherent_backscatter,
+    );
     if frame == Frame::Sp {
         return m;
     }
@@ -420,8 +476,14 @@ pub fn change_frame(m: &Mat4, wi: V3, wo: V3, from: Frame, to: Frame) -> Mat4 {
     let (xi2, yi2, xo2, yo2) = beam_bases(to, wi, wo);
     let c = |a: f64| C64::new(a, 0.0);
     // input: components in basis 2 -> basis 1; output: basis 1 -> basis 2
-    let jin = [[c(dot(xi1, xi2)), c(dot(xi1, yi2))], [c(dot(yi1, xi2)), c(dot(yi1, yi2))]];
-    let jout = [[c(dot(xo2, xo1)), c(dot(xo2, yo1))], [c(dot(yo2, xo1)), c(dot(yo2, yo1))]];
+    let jin = [
+        [c(dot(xi1, xi2)), c(dot(xi1, yi2))],
+        [c(dot(yi1, xi2)), c(dot(yi1, yi2))],
+    ];
+    let jout = [
+        [c(dot(xo2, xo1)), c(dot(xo2, yo1))],
+        [c(dot(yo2, xo1)), c(dot(yo2, yo1))],
+    ];
     let (min, mout) = (jones_to_mueller(&jin), jones_to_mueller(&jout));
     crate::optics::mueller::matmul(&mout, &crate::optics::mueller::matmul(m, &min))
 }

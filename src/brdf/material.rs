@@ -30,13 +30,11 @@ impl Terms {
                 "double" => t.double = true,
                 "multiple" => t.multiple = true,
                 "diffuse" => t.diffuse = true,
-                other => {
-                    return Err(Error::param(
-                        "terms",
-                        format!("{other:?}"),
-                        "each term must be one of \"single\", \"double\", \"multiple\", \"diffuse\"",
-                    ))
-                }
+                other => return Err(Error::param(
+                    "terms",
+                    format!("{other:?}"),
+                    "each term must be one of \"single\", \"double\", \"multiple\", \"diffuse\"",
+                )),
             }
         }
         if !(t.single || t.double || t.multiple || t.diffuse) {
@@ -99,7 +97,12 @@ impl MaterialSpec {
             correlation: None,
             smith_g1: SmithG1::Exact,
             masking: MaskingEval::Table,
-            terms: Terms { single: true, double: false, multiple: true, diffuse: false },
+            terms: Terms {
+                single: true,
+                double: false,
+                multiple: true,
+                diffuse: false,
+            },
             diffuse_albedo: 0.0,
             double_order: Self::DOUBLE_ORDER,
             coherent_backscatter: true,
@@ -182,16 +185,32 @@ impl Material {
             }
         }
         if !(spec.wavelength.is_finite() && spec.wavelength > 0.0) {
-            return Err(Error::param("wavelength", spec.wavelength, "must be finite and > 0 (metres)"));
+            return Err(Error::param(
+                "wavelength",
+                spec.wavelength,
+                "must be finite and > 0 (metres)",
+            ));
         }
         if !(spec.correlation_length.is_finite() && spec.correlation_length >= 0.0) {
-            return Err(Error::param("correlation_length", spec.correlation_length, "must be finite and >= 0 (metres)"));
+            return Err(Error::param(
+                "correlation_length",
+                spec.correlation_length,
+                "must be finite and >= 0 (metres)",
+            ));
         }
         if !(4..=1024).contains(&spec.double_order) {
-            return Err(Error::param("double_order", spec.double_order, "quadrature order must be in [4, 1024]"));
+            return Err(Error::param(
+                "double_order",
+                spec.double_order,
+                "quadrature order must be in [4, 1024]",
+            ));
         }
         if spec.shadowing == Shadowing::None && spec.terms.double {
-            return Err(Error::param("shadowing", "\"none\"", "term \"double\" needs a masking model: \"aps\" or \"smith\""));
+            return Err(Error::param(
+                "shadowing",
+                "\"none\"",
+                "term \"double\" needs a masking model: \"aps\" or \"smith\"",
+            ));
         }
         if !(spec.diffuse_albedo.is_finite() && (0.0..=1.0).contains(&spec.diffuse_albedo)) {
             return Err(Error::param(
@@ -285,13 +304,19 @@ impl Material {
         let f_ms = self.f_ms;
         // With the double bounce on, E includes its albedo, through the escape tables
         // built before this (see `new`).
-        let s_table = if fresnel { self.s_fresnel.as_ref() } else { self.s_white.as_ref() };
+        let s_table = if fresnel {
+            self.s_fresnel.as_ref()
+        } else {
+            self.s_white.as_ref()
+        };
         let e = ZTable::build(self.spec.distribution.scale(), ALBEDO_NODES, |theta| {
             let c = theta.cos();
             let mut v = super::albedo::single_albedo(self, c, fresnel, ALBEDO_ORDER);
             if let Some(st) = s_table {
                 let wi = [theta.sin(), 0.0, c];
-                v += super::double::double_albedo(self, wi, fresnel, DOUBLE_TABLE_ORDER, &|u| eval_escape(st, u));
+                v += super::double::double_albedo(self, wi, fresnel, DOUBLE_TABLE_ORDER, &|u| {
+                    eval_escape(st, u)
+                });
             }
             if let Some(w) = ms {
                 v += (1.0 - w.e.eval(c, theta.sin())).max(0.0) * f_ms;
@@ -306,10 +331,20 @@ impl Material {
     fn escape_table(&self, fresnel: bool) -> (ZTable, ZTable) {
         let scale = self.spec.distribution.scale();
         let up = ZTable::build(scale, S_NODES, |th| {
-            super::double::escape_after_bounce(self, [th.sin(), 0.0, th.cos()], fresnel, DOUBLE_TABLE_ORDER)
+            super::double::escape_after_bounce(
+                self,
+                [th.sin(), 0.0, th.cos()],
+                fresnel,
+                DOUBLE_TABLE_ORDER,
+            )
         });
         let down = ZTable::build(scale, S_NODES, |th| {
-            super::double::escape_after_bounce(self, [th.sin(), 0.0, -th.cos()], fresnel, DOUBLE_TABLE_ORDER)
+            super::double::escape_after_bounce(
+                self,
+                [th.sin(), 0.0, -th.cos()],
+                fresnel,
+                DOUBLE_TABLE_ORDER,
+            )
         });
         (up, down)
     }

@@ -5,22 +5,28 @@ use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, Frame, V3};
 use crate::optics::fresnel::{fresnel_amplitudes, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 
+/// The s/p basis of a reflection off the facet `h` (`k_in`, `k_out` the propagation
+/// directions): `s = normalize(k_in x h)`, `p_in = k_in x s`, `p_out = k_out x s`. When
+/// `k_in` is along `h` (normal incidence on the facet) any `s` normal to `k_in` will do, as
+/// the reflection does not depend on the choice there: `perp`, a unit vector normal to
+/// `k_in` supplied by the caller, is used.
+#[inline]
+pub(crate) fn facet_sp_basis(k_in: V3, k_out: V3, h: V3, perp: V3) -> (V3, V3, V3) {
+    let c = cross(k_in, h);
+    let s = if dot(c, c) > 1e-24 {
+        normalize(c)
+    } else {
+        perp
+    };
+    (s, cross(k_in, s), cross(k_out, s))
+}
+
 /// Jones matrix, in the beam frames `(x_in, y_in) -> (x_out, y_out)`, of a reflection off a
 /// facet with normal `h` for the incident beam `k_in = -wi` (polarization ray tracing).
 #[inline]
 fn facet_jones(wi: V3, wo: V3, h: V3, rs: C64, rp: C64, bases: (V3, V3, V3, V3)) -> Jones {
     let (x_in, y_in, x_out, y_out) = bases;
-    let k_in = neg(wi);
-    // s = normalize(k_in x h); when k_in is along h (normal incidence on the facet) any
-    // vector perpendicular to it will do: the result does not depend on the choice there.
-    let c = cross(k_in, h);
-    let s = if dot(c, c) > 1e-24 {
-        normalize(c)
-    } else {
-        x_in
-    };
-    let p_in = cross(k_in, s);
-    let p_out = cross(wo, s);
+    let (s, p_in, p_out) = facet_sp_basis(neg(wi), wo, h, x_in);
     let (sxi, syi) = (dot(s, x_in), dot(s, y_in));
     let (pxi, pyi) = (dot(p_in, x_in), dot(p_in, y_in));
     let (sxo, syo) = (dot(s, x_out), dot(s, y_out));

@@ -44,10 +44,17 @@ impl MonostaticTable {
                     .iter()
                     .map(|v| {
                         let m00 = v[0][0].max(1e-300);
-                        if k == 0 { m00.ln() } else { v[k / 4][k % 4] / m00 }
+                        if k == 0 {
+                            m00.ln()
+                        } else {
+                            v[k / 4][k % 4] / m00
+                        }
                     })
                     .collect();
-                ZTable { scale, values: vals }
+                ZTable {
+                    scale,
+                    values: vals,
+                }
             })
             .collect();
         MonostaticTable { elements }
@@ -88,7 +95,11 @@ impl MonostaticTable {
                         e = e.max((got[a][b] - want[a][b]).abs());
                     }
                 }
-                if total > 0.0 { e / total } else { 0.0 }
+                if total > 0.0 {
+                    e / total
+                } else {
+                    0.0
+                }
             })
             .reduce(|| 0.0, f64::max)
     }

@@ -72,14 +72,12 @@ impl PyMaterial {
             double_correlated: match double_masking {
                 "seed" => true,
                 "uncorrelated" => false,
-                other => {
-                    return Err(crate::Error::param(
-                        "double_masking",
-                        format!("{other:?}"),
-                        "expected \"seed\" (correlated, eq. 17 made reciprocal) or \"uncorrelated\"",
-                    )
-                    .into())
-                }
+                other => return Err(crate::Error::param(
+                    "double_masking",
+                    format!("{other:?}"),
+                    "expected \"seed\" (correlated, eq. 17 made reciprocal) or \"uncorrelated\"",
+                )
+                .into()),
             },
             wavelength,
             correlation_length,
@@ -232,9 +230,16 @@ impl PyMaterial {
 /// Validate and normalize an (N, 3) array of directions in the upper hemisphere.
 pub fn directions(a: ArrayView2<'_, f64>, name: &'static str) -> crate::Result<Vec<V3>> {
     if a.ncols() != 3 {
-        return Err(crate::Error::Shape(format!("{name} must have shape (..., 3), got last axis {}", a.ncols())));
+        return Err(crate::Error::Shape(format!(
+            "{name} must have shape (..., 3), got last axis {}",
+            a.ncols()
+        )));
     }
-    a.rows().into_iter().enumerate().map(|(i, r)| direction([r[0], r[1], r[2]], name, i)).collect()
+    a.rows()
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| direction([r[0], r[1], r[2]], name, i))
+        .collect()
 }
 
 fn to_array3(n: usize, data: Vec<[[f64; 4]; 4]>) -> Array3<f64> {
@@ -252,7 +257,10 @@ const PAR_MIN: usize = 2048;
 #[inline]
 fn direction(v: [f64; 3], name: &'static str, i: usize) -> crate::Result<V3> {
     if !v.iter().all(|x| x.is_finite()) {
-        return Err(crate::Error::InvalidDirection { name, reason: format!("element {i} = {v:?} is not finite") });
+        return Err(crate::Error::InvalidDirection {
+            name,
+            reason: format!("element {i} = {v:?} is not finite"),
+        });
     }
     let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     if (l - 1.0).abs() > 1e-6 {
@@ -283,11 +291,20 @@ fn brdf_eval<'py>(
     let (wi, wo) = (wi.as_array(), wo.as_array());
     for (a, name) in [(&wi, "wi"), (&wo, "wo")] {
         if a.ncols() != 3 {
-            return Err(crate::Error::Shape(format!("{name} must have shape (..., 3), got last axis {}", a.ncols())).into());
+            return Err(crate::Error::Shape(format!(
+                "{name} must have shape (..., 3), got last axis {}",
+                a.ncols()
+            ))
+            .into());
         }
     }
     if wi.nrows() != wo.nrows() {
-        return Err(crate::Error::Shape(format!("wi and wo have {} and {} directions", wi.nrows(), wo.nrows())).into());
+        return Err(crate::Error::Shape(format!(
+            "wi and wo have {} and {} directions",
+            wi.nrows(),
+            wo.nrows()
+        ))
+        .into());
     }
     let n = wi.nrows();
     // Contiguous row-major input (the Python wrapper guarantees it) read in place.
@@ -381,7 +398,13 @@ fn double_jones(
     let wi = direction(wi, "wi", 0)?;
     let wo = direction(wo, "wo", 0)?;
     let h1 = direction(h1, "h1", 0)?;
-    Ok(crate::brdf::double::double_jones(&material.inner, wi, wo, h1, frame))
+    Ok(crate::brdf::double::double_jones(
+        &material.inner,
+        wi,
+        wo,
+        h1,
+        frame,
+    ))
 }
 
 /// Monostatic table: (theta nodes, Mueller values (n+1, 4, 4), build seconds, max
@@ -395,24 +418,37 @@ fn monostatic_table<'py>(
     nodes: usize,
     double_order: usize,
     measure: bool,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray3<f64>>, f64, Option<f64>)> {
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray3<f64>>,
+    f64,
+    Option<f64>,
+)> {
     if !(4..=100_000).contains(&nodes) {
         return Err(crate::Error::param("nodes", nodes, "must be in [4, 100000]").into());
     }
     if !(4..=1024).contains(&double_order) {
-        return Err(crate::Error::param("double_order", double_order, "must be in [4, 1024]").into());
+        return Err(
+            crate::Error::param("double_order", double_order, "must be in [4, 1024]").into(),
+        );
     }
     let mat = material.inner.clone();
     let (table, secs, err) = py.detach(move || {
         let t0 = std::time::Instant::now();
         let table = crate::brdf::table::MonostaticTable::build(&mat, nodes, double_order);
         let secs = t0.elapsed().as_secs_f64();
-        let err = if measure { Some(table.max_error(&mat)) } else { None };
+        let err = if measure {
+            Some(table.max_error(&mat))
+        } else {
+            None
+        };
         (table, secs, err)
     });
     let scale = table.elements[0].scale;
     let n = nodes + 1;
-    let theta: Vec<f64> = (0..n).map(|i| crate::microfacet::masking::ZTable::theta_of_z(scale, i as f64 / nodes as f64)).collect();
+    let theta: Vec<f64> = (0..n)
+        .map(|i| crate::microfacet::masking::ZTable::theta_of_z(scale, i as f64 / nodes as f64))
+        .collect();
     let mut vals = Array3::<f64>::zeros((n, 4, 4));
     for i in 0..n {
         let m00 = table.elements[0].values[i].exp();
@@ -421,7 +457,12 @@ fn monostatic_table<'py>(
             vals[[i, k / 4, k % 4]] = m00 * t.values[i];
         }
     }
-    Ok((Array1::from(theta).into_pyarray(py), vals.into_pyarray(py), secs, err))
+    Ok((
+        Array1::from(theta).into_pyarray(py),
+        vals.into_pyarray(py),
+        secs,
+        err,
+    ))
 }
 
 /// Coherent-backscatter decorrelation factor gamma for a material and directions.

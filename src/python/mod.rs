@@ -4,8 +4,8 @@ use pyo3::prelude::*;
 
 pub mod brdf;
 mod polarimetry;
-mod seed;
 mod reference;
+mod seed;
 
 pyo3::create_exception!(
     pprender,
