@@ -17,6 +17,7 @@
 
 use super::material::Material;
 use super::single::masking_over_cosines;
+use crate::optics::frames::reflect;
 use crate::optics::fresnel::reflectance;
 use std::f64::consts::{FRAC_PI_4, PI};
 
@@ -62,11 +63,7 @@ pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64
                 if wi_h <= 0.0 {
                     continue;
                 }
-                let wo = [
-                    2.0 * wi_h * h[0] - wi[0],
-                    2.0 * wi_h * h[1] - wi[1],
-                    2.0 * wi_h * h[2] - wi[2],
-                ];
+                let wo = reflect(wi, h, wi_h);
                 if wo[2] <= 0.0 {
                     continue;
                 }

@@ -44,7 +44,7 @@
 
 use super::material::Material;
 use super::single::facet_sp_basis;
-use crate::optics::frames::{beam_bases, dot, neg, normalize, Frame, V3};
+use crate::optics::frames::{beam_bases, dot, neg, normalize, reflect, Frame, V3};
 use crate::optics::fresnel::{fresnel_amplitudes, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 use std::f64::consts::PI;
@@ -83,11 +83,7 @@ pub fn double_jones(
     if wi_h1 <= 0.0 || h1[2] <= 0.0 {
         return None;
     }
-    let d = [
-        2.0 * wi_h1 * h1[0] - wi[0],
-        2.0 * wi_h1 * h1[1] - wi[1],
-        2.0 * wi_h1 * h1[2] - wi[2],
-    ];
+    let d = reflect(wi, h1, wi_h1);
     let hs = [wo[0] - d[0], wo[1] - d[1], wo[2] - d[2]];
     let l2 = dot(hs, hs);
     if l2 <= 1e-300 {
@@ -387,11 +383,7 @@ pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -
         if vh <= 0.0 {
             return;
         }
-        let d2 = [
-            2.0 * vh * h[0] - v[0],
-            2.0 * vh * h[1] - v[1],
-            2.0 * vh * h[2] - v[2],
-        ];
+        let d2 = reflect(v, h, vh);
         if d2[2] <= 0.0 {
             return;
         }
@@ -432,11 +424,7 @@ pub fn double_albedo(
         if wh <= 0.0 {
             return;
         }
-        let d = [
-            2.0 * wh * h1[0] - wi[0],
-            2.0 * wh * h1[1] - wi[1],
-            2.0 * wh * h1[2] - wi[2],
-        ];
+        let d = reflect(wi, h1, wh);
         let fr = if fresnel {
             crate::optics::fresnel::reflectance(wh.min(1.0), mat.spec.eta)
         } else {

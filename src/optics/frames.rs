@@ -29,6 +29,14 @@ pub fn normalize(a: V3) -> V3 {
     [a[0] / l, a[1] / l, a[2] / l]
 }
 
+/// Mirror reflection of the direction `v` (pointing away from the surface) about the unit
+/// normal `h`, given `v.h`: `2 (v.h) h - v`.
+#[inline]
+pub fn reflect(v: V3, h: V3, v_dot_h: f64) -> V3 {
+    let t = 2.0 * v_dot_h;
+    [t * h[0] - v[0], t * h[1] - v[1], t * h[2] - v[2]]
+}
+
 /// Which transverse bases the returned Mueller matrices refer to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Frame {
