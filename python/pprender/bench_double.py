@@ -49,7 +49,7 @@ import numpy as np
 
 import pprender
 from pprender import _core
-from pprender.bench import cpu_model, emit_report, load_average, threads_available, uniform_hemisphere
+from pprender.bench import cpu_model, emit_report, load_average, threads_available, timed, uniform_hemisphere
 
 SEED = 2024
 ORDERS = (16, 24, 32, 48, 64, 96, 128, 192)
@@ -147,12 +147,6 @@ def brdf_parallel(mat: pprender.Material, wi: np.ndarray, wo: np.ndarray) -> np.
     b[idx] = wo
     out: np.ndarray = pprender.brdf(mat, a, b)[idx]
     return out
-
-
-def timed(f: Any) -> float:
-    t0 = time.perf_counter()
-    f()
-    return time.perf_counter() - t0
 
 
 # --------------------------------------------------------------------------------------
