@@ -527,6 +527,30 @@ def n_within(r: List[Tuple[float, float, Tuple]], k: float = 2.0) -> str:
     return f"{n}/{len(r)}"
 
 
+def m00_rows(w: Any, rows: Dict[Tuple[float, str, str], Any], order: int, variants: Tuple[str, str],
+             show_model_only: bool) -> None:
+    """Rows of an M00 model/reference table for one order (index 0 or 1 of ``rows``): the
+    perfect conductor's reference and counts, the cone bias of the first variant, and the
+    ratio of each variant for each material; ``show_model_only`` adds the model value
+    where the reference has too few rays."""
+    first = variants[0]
+    for alpha in ALPHAS:
+        for g in GEOMETRIES:
+            d = rows[(alpha, "PEC", g[0])][order]
+            ok = d["counts"] >= MIN_COUNTS and d["ref"] > 0
+            bias = d[first]["point"] / d[first]["m00"] - 1 if d[first]["m00"] > 0 else float("nan")
+            cells = []
+            for e, _ in ETAS:
+                de = rows[(alpha, e, g[0])][order]
+                for k in variants:
+                    cells.append(fmt_ratio(de[k]["m00"], de["ref"], de["se"]) if ok else "n/a")
+            refs = f"{d['ref']:.4g} ± {100 * d['se'] / d['ref']:.1f}%" if d["ref"] > 0 else "0"
+            if show_model_only and not ok:
+                refs += f" (model {d[first]['m00']:.2g})"
+            bias_s = f"{100 * bias:+.1f}%" if ok else ""
+            w(f"| {alpha} | {g[0]} | {d['counts']} | {refs} | {bias_s} | " + " | ".join(cells) + " |")
+
+
 def report(res: Dict[str, Any], argv: Sequence[str]) -> str:
     rows, albs = res["rows"], res["albedo"]
     st = summary_stats(res)
@@ -618,19 +642,7 @@ def report(res: Dict[str, Any], argv: Sequence[str]) -> str:
     w("")
     w("| alpha | geometry | counts | ref f1 (PEC) | cone bias | " + " | ".join(f"APS {e} | Smith {e}" for e, _ in ETAS) + " |")
     w("| ---: | --- | ---: | ---: | ---: | " + " | ".join("---: | ---:" for _ in ETAS) + " |")
-    for alpha in ALPHAS:
-        for g in GEOMETRIES:
-            d = rows[(alpha, "PEC", g[0])][0]
-            ok = d["counts"] >= MIN_COUNTS and d["ref"] > 0
-            bias = d["aps"]["point"] / d["aps"]["m00"] - 1 if d["aps"]["m00"] > 0 else float("nan")
-            cells = []
-            for e, _ in ETAS:
-                de = rows[(alpha, e, g[0])][0]
-                for k in ("aps", "smith"):
-                    cells.append(fmt_ratio(de[k]["m00"], de["ref"], de["se"]) if ok else "n/a")
-            refs = f"{d['ref']:.4g} ± {100 * d['se'] / d['ref']:.1f}%" if d["ref"] > 0 else "0"
-            bias_s = f"{100 * bias:+.1f}%" if ok else ""
-            w(f"| {alpha} | {g[0]} | {d['counts']} | {refs} | {bias_s} | " + " | ".join(cells) + " |")
+    m00_rows(w, rows, 0, ("aps", "smith"), show_model_only=False)
     w("")
     w(f"Cone-bias check: order 1 measured with the {CONE2} rad cone of the order-2 runs, against the model's "
       f"{CONE2} rad cone mean (APS, PEC): ratio vs the {CONE1} rad result, where both are measured.")
@@ -657,20 +669,7 @@ def report(res: Dict[str, Any], argv: Sequence[str]) -> str:
     w("")
     w("| alpha | geometry | counts | ref f2 (PEC) | cone bias | " + " | ".join(f"seed {e} | unc {e}" for e, _ in ETAS) + " |")
     w("| ---: | --- | ---: | ---: | ---: | " + " | ".join("---: | ---:" for _ in ETAS) + " |")
-    for alpha in ALPHAS:
-        for g in GEOMETRIES:
-            d = rows[(alpha, "PEC", g[0])][1]
-            ok = d["counts"] >= MIN_COUNTS and d["ref"] > 0
-            bias = d["seed"]["point"] / d["seed"]["m00"] - 1 if d["seed"]["m00"] > 0 else float("nan")
-            cells = []
-            for e, _ in ETAS:
-                de = rows[(alpha, e, g[0])][1]
-                for k in ("seed", "unc"):
-                    cells.append(fmt_ratio(de[k]["m00"], de["ref"], de["se"]) if ok else "n/a")
-            refs = f"{d['ref']:.4g} ± {100 * d['se'] / d['ref']:.1f}%" if d["ref"] > 0 else "0"
-            model_only = f"{d['seed']['m00']:.2g}" if not ok else ""
-            w(f"| {alpha} | {g[0]} | {d['counts']} | {refs}{' (model ' + model_only + ')' if model_only else ''} | "
-              f"{f'{100 * bias:+.1f}%' if ok else ''} | " + " | ".join(cells) + " |")
+    m00_rows(w, rows, 1, ("seed", "unc"), show_model_only=True)
     w("")
 
     # ------------------------------------------------------------------ polarization
