@@ -22,6 +22,7 @@ import numpy as np
 
 from . import _core
 from ._core import Error, Material, __version__
+from . import models
 
 __all__ = [
     "Error",
