@@ -21,16 +21,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from ._core import Error, Material, __version__
+from ._core import BrdfTable, Error, Material, __version__, brdf_table
 from . import models
 
 __all__ = [
+    "BrdfTable",
     "Error",
     "Material",
     "MonostaticTable",
     "__version__",
     "albedo",
     "brdf",
+    "brdf_table",
     "monostatic_table",
     "specular",
     "white_furnace",

@@ -198,3 +198,38 @@ def reference_height_field(
 def monostatic_table(
     material: Material, nodes: int = 64, double_order: int = 48, measure: bool = True
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float, float | None]: ...
+@final
+class BrdfTable:
+    """The total Mueller BRDF tabulated for the renderer (src/brdf/table.rs, docs/render-table.md)."""
+
+    def eval(self, theta: float, psi: float) -> npt.NDArray[np.float64]: ...
+    def eval_dirs(
+        self, wi: tuple[float, float, float] | Sequence[float], wo: tuple[float, float, float] | Sequence[float]
+    ) -> npt.NDArray[np.float64]: ...
+    def max_error(self, theta_max: float = ..., dynamic_range: float = ...) -> dict[str, Any]: ...
+    @property
+    def build_seconds(self) -> float: ...
+    @property
+    def bistatic_angle(self) -> float: ...
+    @property
+    def frame(self) -> str: ...
+    @property
+    def kinds(self) -> list[str]: ...
+    def arrays(self) -> list[tuple[float, int, int, npt.NDArray[np.float64]]]: ...
+
+def brdf_table(
+    material: Material,
+    bistatic_angle: float = 0.0,
+    n_z: int | None = None,
+    n_psi: int | None = None,
+    double_order: int | None = None,
+    *,
+    n_z_lambertian: int | None = None,
+    n_psi_lambertian: int | None = None,
+    n_z_double: int | None = None,
+    n_psi_double: int | None = None,
+    scale: float | None = None,
+    scale_lambertian: float | None = None,
+    scale_double: float | None = None,
+    frame: str = "bisector",
+) -> BrdfTable: ...

@@ -4,9 +4,12 @@ use crate::brdf::{self as core_brdf, MaterialSpec, Terms};
 use crate::microfacet::{Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::{Eta, C64};
-use numpy::ndarray::{Array1, Array3, ArrayView2};
-use numpy::{IntoPyArray, PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::ndarray::{Array1, Array2, Array3, ArrayView2};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
 use rayon::prelude::*;
 use std::str::FromStr;
 use std::sync::Arc;
@@ -465,6 +468,204 @@ fn monostatic_table<'py>(
     ))
 }
 
+/// The total Mueller BRDF tabulated for the renderer (`crate::brdf::table::BrdfTable`).
+#[pyclass(module = "pprender", name = "BrdfTable", frozen)]
+pub struct PyBrdfTable {
+    table: crate::brdf::table::BrdfTable,
+    material: Arc<core_brdf::Material>,
+    build_seconds: f64,
+}
+
+fn mat4_to_array<'py>(py: Python<'py>, m: [[f64; 4]; 4]) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_vec((4, 4), m.into_iter().flatten().collect())
+        .expect("shape")
+        .into_pyarray(py)
+}
+
+#[pymethods]
+impl PyBrdfTable {
+    /// Interpolated BRDF (4, 4) at table coordinates, in the table's frame.
+    fn eval<'py>(
+        &self,
+        py: Python<'py>,
+        theta: f64,
+        psi: f64,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        if !(theta.is_finite() && (0.0..=std::f64::consts::FRAC_PI_2).contains(&theta)) {
+            return Err(crate::Error::param("theta", theta, "must be in [0, pi/2] radians").into());
+        }
+        if !(psi.is_finite() && psi.abs() <= std::f64::consts::PI) {
+            return Err(crate::Error::param("psi", psi, "must be in [-pi, pi] radians").into());
+        }
+        Ok(mat4_to_array(py, self.table.eval(theta, psi)))
+    }
+
+    /// Interpolated BRDF (4, 4) for local unit directions, in the core's "sp" frame.
+    fn eval_dirs<'py>(
+        &self,
+        py: Python<'py>,
+        wi: [f64; 3],
+        wo: [f64; 3],
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let wi = direction(wi, "wi", 0)?;
+        let wo = direction(wo, "wo", 0)?;
+        Ok(mat4_to_array(py, self.table.eval_dirs(wi, wo)))
+    }
+
+    /// Largest interpolation error at the cell centres with theta <= theta_max, per part.
+    #[pyo3(signature = (theta_max=85f64.to_radians(), dynamic_range=crate::brdf::table::DYNAMIC_RANGE))]
+    fn max_error<'py>(
+        &self,
+        py: Python<'py>,
+        theta_max: f64,
+        dynamic_range: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if !(theta_max.is_finite() && theta_max >= 0.0) {
+            return Err(crate::Error::param("theta_max", theta_max, "must be >= 0 radians").into());
+        }
+        if !(dynamic_range.is_finite() && dynamic_range >= 0.0) {
+            return Err(crate::Error::param(
+                "dynamic_range",
+                dynamic_range,
+                "must be finite and >= 0",
+            )
+            .into());
+        }
+        let (table, mat) = (&self.table, self.material.clone());
+        let e = py.detach(|| table.max_error(&mat, theta_max, dynamic_range));
+        let d = PyDict::new(py);
+        d.set_item("max", e.max)?;
+        let parts = PyList::empty(py);
+        for p in e.parts {
+            let pd = PyDict::new(py);
+            pd.set_item("kind", p.kind)?;
+            pd.set_item("max", p.max)?;
+            pd.set_item("theta", p.theta)?;
+            pd.set_item("psi", p.psi)?;
+            pd.set_item("element", (p.element / 4, p.element % 4))?;
+            pd.set_item("points", p.points)?;
+            parts.append(pd)?;
+        }
+        d.set_item("parts", parts)?;
+        Ok(d)
+    }
+
+    /// Seconds the build took.
+    #[getter]
+    fn build_seconds(&self) -> f64 {
+        self.build_seconds
+    }
+    #[getter]
+    fn bistatic_angle(&self) -> f64 {
+        self.table.beta
+    }
+    #[getter]
+    fn frame(&self) -> &'static str {
+        match self.table.frame {
+            crate::brdf::table::TableFrame::Sp => "sp",
+            crate::brdf::table::TableFrame::Bisector => "bisector",
+        }
+    }
+    /// What each part holds: "single", "multiple+diffuse", "double".
+    #[getter]
+    fn kinds(&self) -> Vec<&'static str> {
+        self.table.kinds.iter().map(|k| k.name()).collect()
+    }
+
+    /// Per part: (scale, n_z, n_psi, data) with data of shape (n_psi + 1, n_z + 1, 16).
+    #[allow(clippy::type_complexity)]
+    fn arrays<'py>(&self, py: Python<'py>) -> Vec<(f64, usize, usize, Bound<'py, PyArray3<f64>>)> {
+        self.table
+            .parts
+            .iter()
+            .map(|p| {
+                let a = Array3::from_shape_vec((p.n_psi + 1, p.n_z + 1, 16), p.data.clone())
+                    .expect("shape");
+                (p.scale, p.n_z, p.n_psi, a.into_pyarray(py))
+            })
+            .collect()
+    }
+
+    fn __repr__(&self) -> String {
+        let parts: Vec<String> = self
+            .table
+            .kinds
+            .iter()
+            .zip(&self.table.parts)
+            .map(|(k, p)| format!("{}: {}x{}", k.name(), p.n_z, p.n_psi))
+            .collect();
+        format!(
+            "BrdfTable(bistatic_angle={}, frame={:?}, parts=[{}])",
+            self.table.beta,
+            self.frame(),
+            parts.join(", ")
+        )
+    }
+}
+
+/// Build a `BrdfTable` (see `crate::brdf::table`).
+#[pyfunction]
+#[pyo3(signature = (material, bistatic_angle=0.0, n_z=None, n_psi=None, double_order=None, *,
+    n_z_lambertian=None, n_psi_lambertian=None, n_z_double=None, n_psi_double=None,
+    scale=None, scale_lambertian=None, scale_double=None, frame="bisector"))]
+#[allow(clippy::too_many_arguments)]
+fn brdf_table(
+    py: Python<'_>,
+    material: &PyMaterial,
+    bistatic_angle: f64,
+    n_z: Option<usize>,
+    n_psi: Option<usize>,
+    double_order: Option<usize>,
+    n_z_lambertian: Option<usize>,
+    n_psi_lambertian: Option<usize>,
+    n_z_double: Option<usize>,
+    n_psi_double: Option<usize>,
+    scale: Option<f64>,
+    scale_lambertian: Option<f64>,
+    scale_double: Option<f64>,
+    frame: &str,
+) -> PyResult<PyBrdfTable> {
+    use crate::brdf::table::{BrdfTable, BrdfTableOptions, PartOptions, TableFrame};
+    let frame = match frame {
+        "bisector" => TableFrame::Bisector,
+        "sp" => TableFrame::Sp,
+        other => {
+            return Err(crate::Error::param(
+                "frame",
+                format!("{other:?}"),
+                "expected \"bisector\" or \"sp\"",
+            )
+            .into())
+        }
+    };
+    let opts = BrdfTableOptions {
+        single: PartOptions { n_z, n_psi, scale },
+        lambertian: PartOptions {
+            n_z: n_z_lambertian,
+            n_psi: n_psi_lambertian,
+            scale: scale_lambertian,
+        },
+        double: PartOptions {
+            n_z: n_z_double,
+            n_psi: n_psi_double,
+            scale: scale_double,
+        },
+        double_order,
+        frame: Some(frame),
+    };
+    let mat = material.inner.clone();
+    let (table, secs) = py.detach(|| {
+        let t0 = std::time::Instant::now();
+        let t = BrdfTable::build(&mat, bistatic_angle, &opts);
+        (t, t0.elapsed().as_secs_f64())
+    });
+    Ok(PyBrdfTable {
+        table: table?,
+        material: mat,
+        build_seconds: secs,
+    })
+}
+
 /// Coherent-backscatter decorrelation factor gamma for a material and directions.
 #[pyfunction]
 fn cbe_gamma(material: &PyMaterial, wi: [f64; 3], wo: [f64; 3]) -> f64 {
@@ -476,6 +677,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(double_jones, m)?)?;
     m.add_function(wrap_pyfunction!(cbe_gamma, m)?)?;
     m.add_function(wrap_pyfunction!(monostatic_table, m)?)?;
+    m.add_function(wrap_pyfunction!(brdf_table, m)?)?;
+    m.add_class::<PyBrdfTable>()?;
     m.add_class::<PyMaterial>()?;
     m.add_function(wrap_pyfunction!(brdf_eval, m)?)?;
     m.add_function(wrap_pyfunction!(specular, m)?)?;
