@@ -106,7 +106,7 @@ fn pulse_box_moments(w: f32) -> array<f32, 6> {
     return m;
 }
 
-// 1/(2k)!, k = 0..5.
+// 1/(2k)!, k = 0..5. (hp, hm are `var` so that runtime indexing works on every backend.)
 const PULSE_INV_FACT_EVEN = array<f32, 6>(1.0, 0.5, 0.041666668, 0.0013888889, 2.4801588e-5, 2.755732e-7);
 
 // C in sigma units, aa >= bb >= 0.
@@ -139,8 +139,8 @@ fn pulse_cdf_std(y_in: f32, aa: f32, bb: f32) -> f32 {
         let mb = pulse_box_moments(bb);
         let tp = clamp(yp, -PULSE_T_CLAMP, PULSE_T_CLAMP);
         let tm = clamp(ym, -PULSE_T_CLAMP, PULSE_T_CLAMP);
-        let hp = pulse_hermite(tp);
-        let hm = pulse_hermite(tm);
+        var hp = pulse_hermite(tp);
+        var hm = pulse_hermite(tm);
         let pp = pulse_norm_pdf(tp);
         let pm = pulse_norm_pdf(tm);
         var s: f32 = 0.0;

@@ -1098,6 +1098,13 @@ mod tests {
         )
         .validate(&module)
         .expect("pulse.wgsl validates");
+        // It needs no optional capability either.
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .expect("pulse.wgsl validates without capabilities");
         assert!(module
             .functions
             .iter()
