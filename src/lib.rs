@@ -16,6 +16,7 @@ pub mod microfacet;
 pub mod optics;
 pub mod quad;
 pub mod reference;
+pub mod render;
 
 #[cfg(feature = "python")]
 mod python;

@@ -1,0 +1,1239 @@
+//! The received pulse convolved with a pixel's range footprint, as a CDF.
+//!
+//! Within a pixel the range is `r(u, v) = r0 + gx u + gy v` with `u, v` uniform on
+//! `[-delta/2, delta/2]`, so the pixel's range density is the convolution of two box
+//! densities of widths `a = |gx| delta` and `b = |gy| delta` (a trapezoid). The profile bin
+//! `[e_k, e_{k+1})` of that pixel gets
+//!
+//! ```text
+//! W_k = C(e_{k+1} - r0) - C(e_k - r0),    C = CDF of (p * box_a * box_b),
+//! ```
+//!
+//! `p` being the received pulse in range units, so the weights telescope: their sum over all
+//! bins is `C(last edge) - C(first edge)` exactly (1 when the bins cover the support).
+//!
+//! # Gaussian pulse: the formulas and regimes
+//!
+//! Everything is evaluated in sigma units, `y = x/s`, `A = a/s`, `B = b/s`, with the widths
+//! sorted so that `A >= B`, and `s = max(sigma, KAPPA * max(|x|, a, b), S_MIN)` (the clamp only
+//! matters when sigma is zero or negligible against the widths; it changes the result by
+//! less than about `KAPPA`, and it keeps every scaled quantity below `1/KAPPA`).
+//! With `Phi`, `phi` the standard normal CDF and density, define the even, decaying functions
+//!
+//! ```text
+//! Q(t)  = Psi2(-|t|) = ((t^2 + 1) Phi(-|t|) - |t| phi(t)) / 2      (Q(0) = 1/4)
+//! E1(t) = Psi1(t) - max(t, 0) = phi(t) - |t| Phi(-|t|)
+//! E2(t) = Psi2(t) - max(t, 0)^2 / 2 = Q(t) if t <= 0, 1/2 - Q(t) if t > 0
+//! ```
+//!
+//! (`Psi1 = x Phi + phi` and `Psi2 = ((x^2+1) Phi + x phi)/2` are the first and second
+//! antiderivatives of `Phi`; the identities `Psi1(x) - Psi1(-x) = x` and
+//! `Psi2(x) + Psi2(-x) = (x^2+1)/2` give the forms above). `Q`, `E1`, `E2` are bounded by 1/2
+//! and evaluated with an absolute error of a few ulps of 1/2 (only `Phi(-|t|)` of a
+//! non-positive argument is ever used, so the erfc's relative accuracy carries over).
+//! Arguments of `Q`, `E1` and the Hermite terms are clamped to `|t| <= 40`, where they are 0.
+//!
+//! 1. **Both widths small** (`A < ALPHA`): the moment (Gram-Charlier) series of `Phi(y - W)`,
+//!    `W = U + V`, which terminates only at infinity but converges fast:
+//!    `C = Phi(y) - phi(y) * sum_{k=1..5} M_{2k}/(2k)! He_{2k-1}(y)`, with `He_n` the
+//!    probabilists' Hermite polynomials (`He_{n+1} = y He_n - n He_{n-1}`) and
+//!    `M_{2k}` the even moments of `U + V`, from the box moments `mu_{2k}(A) = (A/2)^{2k}/(2k+1)`:
+//!    `M2 = mu2a + mu2b`, `M4 = mu4a + 6 mu2a mu2b + mu4b`,
+//!    `M6 = mu6a + 15 (mu4a mu2b + mu2a mu4b) + mu6b`,
+//!    `M8 = mu8a + 28 (mu6a mu2b + mu2a mu6b) + 70 mu4a mu4b + mu8b`,
+//!    `M10 = mu10a + 45 (mu8a mu2b + mu2a mu8b) + 210 (mu6a mu4b + mu4a mu6b) + mu10b`.
+//!    Exact for `A = B = 0` (`C = Phi(y)`).
+//! 2. **One width small** (`A >= ALPHA`, `B < BETA`): the single-box CDF
+//!    `F_A(y) = clamp((y + A/2)/A, 0, 1) + (E1(y + A/2) - E1(y - A/2))/A` (the uniform CDF plus a
+//!    bounded correction, error ~ eps/A) and the moment series in `B` only:
+//!    `C = F_A(y) + sum_{k=1..5} mu_{2k}(B)/(2k)! * (He_{2k-2} phi (y+A/2) - He_{2k-2} phi (y-A/2)) / A`.
+//!    Exact for `B = 0`.
+//! 3. **Both widths large** (`B >= BETA`): the second difference of `Psi2` split into the
+//!    trapezoid CDF (second difference of `max(t,0)^2/2`, evaluated piecewise without
+//!    cancellation) and the bounded rest:
+//!    `C = T(y) + ((E2(y+h1) - E2(y+h2)) - (E2(y-h2) - E2(y-h1))) / (A B)`,
+//!    `h1 = (A+B)/2`, `h2 = (A-B)/2`, with
+//!    `T(y) = 0 | (y+h1)^2/(2AB) | (y + A/2)/A | 1 - (h1-y)^2/(2AB) | 1` on
+//!    `y <= -h1 | <= -h2 | <= h2 | < h1 | else`. Error ~ eps/(A B) <= eps/BETA^2.
+//!
+//! The switch points are [`ALPHA_F64`], [`BETA_F64`] for the f64 reference and [`ALPHA_F32`],
+//! [`BETA_F32`] for the f32 twin (the f32 twin has a larger rounding floor, so it can afford
+//! the series over a wider range and must keep `1/(A B)` smaller).
+//!
+//! # Sampled pulse
+//!
+//! See [`SampledPulse`]: the samples are joined piecewise linearly (the pulse is the sum of
+//! hat functions of half-width `dt` centred on the samples, i.e. it goes linearly to zero one
+//! spacing beyond each end), and `C` is evaluated exactly (up to rounding) from tables of the
+//! CDF and its two antiderivatives, with the same split into a trapezoid and bounded rests
+//! for wide footprints.
+
+use crate::{Error, Result};
+use libm::erfc;
+
+/// Speed of light in vacuum (m/s), for converting a temporal pulse width to range.
+pub const C_LIGHT: f64 = 299_792_458.0;
+
+/// Regime switch of the f64 reference: the double moment series is used for `A < ALPHA_F64`.
+pub const ALPHA_F64: f64 = 0.125;
+/// Regime switch of the f64 reference: the series in the smaller width `B` for `B < BETA_F64`.
+pub const BETA_F64: f64 = 0.4;
+/// Regime switch of the f32 twin, see [`ALPHA_F64`].
+pub const ALPHA_F32: f32 = 0.5;
+/// Regime switch of the f32 twin, see [`BETA_F64`].
+pub const BETA_F32: f32 = 1.0;
+
+const INV_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
+/// |t| beyond which phi, Q, E1 and the Hermite terms are taken as their limits (all below
+/// 1e-300 there).
+const T_CLAMP: f64 = 40.0;
+
+/// Gaussian range standard deviation from a temporal FWHM `tau` (s): the range FWHM is
+/// `c tau / 2` (two-way travel) and `sigma = FWHM / (2 sqrt(2 ln 2))`.
+pub fn sigma_from_fwhm_time(tau: f64) -> f64 {
+    sigma_from_range_fwhm(C_LIGHT * tau / 2.0)
+}
+
+/// Gaussian standard deviation from a FWHM in the same (range) units.
+pub fn sigma_from_range_fwhm(fwhm: f64) -> f64 {
+    fwhm / (2.0 * (2.0 * std::f64::consts::LN_2).sqrt())
+}
+
+// ---------------------------------------------------------------------------------------
+// f64 reference
+// ---------------------------------------------------------------------------------------
+
+/// Standard normal CDF, `erfc(-x/sqrt 2)/2` with `libm::erfc` (musl's port of the Sun/FreeBSD
+/// `s_erf.c`, error below 1 ulp). Not `statrs::function::erf::erfc`: statrs 0.19 writes the
+/// float-exact offsets of Boost's rational approximations as 10-digit f64 literals and is
+/// off by ~1e-11 for arguments >= 0.5 (e.g. Phi(1) by 1.4e-11; see the tests).
+pub fn norm_cdf(x: f64) -> f64 {
+    0.5 * erfc(-x * std::f64::consts::FRAC_1_SQRT_2)
+}
+
+/// Standard normal density.
+pub fn norm_pdf(x: f64) -> f64 {
+    INV_SQRT_2PI * (-0.5 * x * x).exp()
+}
+
+fn q64(t: f64) -> f64 {
+    let y = t.abs().min(T_CLAMP);
+    0.5 * ((y * y + 1.0) * norm_cdf(-y) - y * norm_pdf(y))
+}
+
+fn e1_64(t: f64) -> f64 {
+    let y = t.abs().min(T_CLAMP);
+    norm_pdf(y) - y * norm_cdf(-y)
+}
+
+fn e2_64(t: f64) -> f64 {
+    if t <= 0.0 {
+        q64(t)
+    } else {
+        0.5 - q64(t)
+    }
+}
+
+/// CDF of the trapezoid `box_a * box_b` (any consistent units), `a >= b > 0`.
+fn trap64(y: f64, a: f64, b: f64) -> f64 {
+    let h1 = 0.5 * (a + b);
+    let h2 = 0.5 * (a - b);
+    if y <= -h1 {
+        0.0
+    } else if y <= -h2 {
+        let z = y + h1;
+        z * z / (2.0 * a * b)
+    } else if y <= h2 {
+        (y + 0.5 * a) / a
+    } else if y < h1 {
+        let z = h1 - y;
+        1.0 - z * z / (2.0 * a * b)
+    } else {
+        1.0
+    }
+}
+
+/// `He_0..=He_9` at `y` by the recurrence.
+fn hermite64(y: f64) -> [f64; 10] {
+    let mut he = [0.0; 10];
+    he[0] = 1.0;
+    he[1] = y;
+    for n in 1..9 {
+        he[n + 1] = y * he[n] - n as f64 * he[n - 1];
+    }
+    he
+}
+
+/// `mu_{2k}(w) = (w/2)^{2k}/(2k+1)` for k = 0..=5.
+fn box_moments64(w: f64) -> [f64; 6] {
+    let u = 0.25 * w * w;
+    let mut m = [1.0; 6];
+    let mut p = 1.0;
+    for (k, mk) in m.iter_mut().enumerate().skip(1) {
+        p *= u;
+        *mk = p / (2 * k + 1) as f64;
+    }
+    m
+}
+
+const INV_FACT_EVEN: [f64; 6] = [
+    1.0,
+    1.0 / 2.0,
+    1.0 / 24.0,
+    1.0 / 720.0,
+    1.0 / 40320.0,
+    1.0 / 3628800.0,
+];
+
+/// C in sigma units, `aa >= bb >= 0`.
+fn cdf_std64(y: f64, aa: f64, bb: f64) -> f64 {
+    if aa < ALPHA_F64 {
+        let y = y.clamp(-T_CLAMP, T_CLAMP);
+        let ma = box_moments64(aa);
+        let mb = box_moments64(bb);
+        let m2 = ma[1] + mb[1];
+        let m4 = ma[2] + 6.0 * ma[1] * mb[1] + mb[2];
+        let m6 = ma[3] + 15.0 * (ma[2] * mb[1] + ma[1] * mb[2]) + mb[3];
+        let m8 = ma[4] + 28.0 * (ma[3] * mb[1] + ma[1] * mb[3]) + 70.0 * ma[2] * mb[2] + mb[4];
+        let m10 = ma[5]
+            + 45.0 * (ma[4] * mb[1] + ma[1] * mb[4])
+            + 210.0 * (ma[3] * mb[2] + ma[2] * mb[3])
+            + mb[5];
+        let he = hermite64(y);
+        let s = m2 * INV_FACT_EVEN[1] * he[1]
+            + m4 * INV_FACT_EVEN[2] * he[3]
+            + m6 * INV_FACT_EVEN[3] * he[5]
+            + m8 * INV_FACT_EVEN[4] * he[7]
+            + m10 * INV_FACT_EVEN[5] * he[9];
+        norm_cdf(y) - norm_pdf(y) * s
+    } else if bb < BETA_F64 {
+        let yp = y + 0.5 * aa;
+        let ym = y - 0.5 * aa;
+        let fa = (yp / aa).clamp(0.0, 1.0) + (e1_64(yp) - e1_64(ym)) / aa;
+        let mb = box_moments64(bb);
+        let tp = yp.clamp(-T_CLAMP, T_CLAMP);
+        let tm = ym.clamp(-T_CLAMP, T_CLAMP);
+        let (hp, hm) = (hermite64(tp), hermite64(tm));
+        let (pp, pm) = (norm_pdf(tp), norm_pdf(tm));
+        let mut s = 0.0;
+        for k in 1..=5 {
+            s += mb[k] * INV_FACT_EVEN[k] * (hp[2 * k - 2] * pp - hm[2 * k - 2] * pm);
+        }
+        fa + s / aa
+    } else {
+        let h1 = 0.5 * (aa + bb);
+        let h2 = 0.5 * (aa - bb);
+        let d = (e2_64(y + h1) - e2_64(y + h2)) - (e2_64(y - h2) - e2_64(y - h1));
+        trap64(y, aa, bb) + d / (aa * bb)
+    }
+}
+
+/// CDF at `x` of a centred Gaussian pulse of standard deviation `sigma` convolved with boxes
+/// of widths `a` and `b` (all in range units; the widths' signs are ignored).
+///
+/// f64 reference. Measured in the tests against brute-force 2-D Gauss-Legendre quadrature
+/// over u, v of `Phi((x - u - v)/sigma)`: max absolute error 8.9e-16 (asserted < 3e-15) for
+/// a/sigma, b/sigma from 0 to 1e4 (both small, both huge, either much larger than the other,
+/// both sides of each switch), x over +-((a+b)/2 + 10 sigma) and around the trapezoid's
+/// corners; jumps at the regime switches <= 1.6e-15. See the [module docs](self) for the
+/// formulas. `sigma = 0` gives the trapezoid CDF; infinite `x` gives 0 or 1.
+pub fn cdf_gauss_box2(x: f64, sigma: f64, a: f64, b: f64) -> f64 {
+    let x = x.clamp(-1e300, 1e300);
+    let a = a.abs().min(1e300);
+    let b = b.abs().min(1e300);
+    let m = x.abs().max(a).max(b);
+    let s = sigma.max(1e-16 * m).max(1e-300);
+    let (aa, bb) = if a >= b {
+        (a / s, b / s)
+    } else {
+        (b / s, a / s)
+    };
+    cdf_std64(x / s, aa, bb)
+}
+
+/// Bin weights of one pixel for a Gaussian pulse: `out[k] = C(edges[k+1] - r0) -
+/// C(edges[k] - r0)` with `C` = [`cdf_gauss_box2`]. `edges` must be increasing and
+/// `out.len() + 1 == edges.len()`.
+pub fn bin_weights_f64(r0: f64, a: f64, b: f64, sigma: f64, edges: &[f64], out: &mut [f64]) {
+    assert_eq!(out.len() + 1, edges.len(), "need one more edge than bins");
+    let mut prev = cdf_gauss_box2(edges[0] - r0, sigma, a, b);
+    for (o, &e) in out.iter_mut().zip(&edges[1..]) {
+        let c = cdf_gauss_box2(e - r0, sigma, a, b);
+        *o = c - prev;
+        prev = c;
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// f32 twin (the formulas of shaders/pulse.wgsl)
+// ---------------------------------------------------------------------------------------
+
+const INV_SQRT_2PI_F32: f32 = 0.3989423;
+const T_CLAMP_F32: f32 = 40.0;
+
+/// Complementary error function in f32: Numerical Recipes' `erfcc` (a Chebyshev fit with
+/// fractional error below 1.2e-7 for all x in exact arithmetic), evaluated in f32. Measured in
+/// the tests against libm's f64 erfc: relative error below 3.5e-7 on [0, 1] and below
+/// 3.5e-7 (1 + x^2) on [0, 9] (the f32 rounding of x^2 inside the exponential), absolute
+/// error below 3.5e-7 for x < 0.
+pub fn erfc_f32(x: f32) -> f32 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let poly = -1.2655122
+        + t * (1.0000237
+            + t * (0.37409195
+                + t * (0.09678418
+                    + t * (-0.18628806
+                        + t * (0.27886808
+                            + t * (-1.135204
+                                + t * (1.4885159 + t * (-0.82215226 + t * 0.17087276))))))));
+    let r = t * (-z * z + poly).exp();
+    if x >= 0.0 {
+        r
+    } else {
+        2.0 - r
+    }
+}
+
+/// Standard normal CDF in f32 from [`erfc_f32`].
+pub fn norm_cdf_f32(x: f32) -> f32 {
+    0.5 * erfc_f32(-x * std::f32::consts::FRAC_1_SQRT_2)
+}
+
+/// Standard normal density in f32.
+pub fn norm_pdf_f32(x: f32) -> f32 {
+    INV_SQRT_2PI_F32 * (-0.5 * x * x).exp()
+}
+
+fn q32(t: f32) -> f32 {
+    let y = t.abs().min(T_CLAMP_F32);
+    0.5 * ((y * y + 1.0) * norm_cdf_f32(-y) - y * norm_pdf_f32(y))
+}
+
+fn e1_32(t: f32) -> f32 {
+    let y = t.abs().min(T_CLAMP_F32);
+    norm_pdf_f32(y) - y * norm_cdf_f32(-y)
+}
+
+fn e2_32(t: f32) -> f32 {
+    if t <= 0.0 {
+        q32(t)
+    } else {
+        0.5 - q32(t)
+    }
+}
+
+fn trap32(y: f32, a: f32, b: f32) -> f32 {
+    let h1 = 0.5 * (a + b);
+    let h2 = 0.5 * (a - b);
+    if y <= -h1 {
+        0.0
+    } else if y <= -h2 {
+        let z = y + h1;
+        z * z / (2.0 * a * b)
+    } else if y <= h2 {
+        (y + 0.5 * a) / a
+    } else if y < h1 {
+        let z = h1 - y;
+        1.0 - z * z / (2.0 * a * b)
+    } else {
+        1.0
+    }
+}
+
+fn hermite32(y: f32) -> [f32; 10] {
+    let mut he = [0.0f32; 10];
+    he[0] = 1.0;
+    he[1] = y;
+    for n in 1..9 {
+        he[n + 1] = y * he[n] - n as f32 * he[n - 1];
+    }
+    he
+}
+
+fn box_moments32(w: f32) -> [f32; 6] {
+    let u = 0.25 * w * w;
+    let mut m = [1.0f32; 6];
+    let mut p = 1.0f32;
+    for (k, mk) in m.iter_mut().enumerate().skip(1) {
+        p *= u;
+        *mk = p / (2 * k + 1) as f32;
+    }
+    m
+}
+
+const INV_FACT_EVEN_F32: [f32; 6] = [
+    1.0,
+    0.5,
+    0.041666668,
+    0.0013888889,
+    2.4801588e-5,
+    2.755732e-7,
+];
+
+fn cdf_std32(y: f32, aa: f32, bb: f32) -> f32 {
+    if aa < ALPHA_F32 {
+        let y = y.clamp(-T_CLAMP_F32, T_CLAMP_F32);
+        let ma = box_moments32(aa);
+        let mb = box_moments32(bb);
+        let m2 = ma[1] + mb[1];
+        let m4 = ma[2] + 6.0 * ma[1] * mb[1] + mb[2];
+        let m6 = ma[3] + 15.0 * (ma[2] * mb[1] + ma[1] * mb[2]) + mb[3];
+        let m8 = ma[4] + 28.0 * (ma[3] * mb[1] + ma[1] * mb[3]) + 70.0 * ma[2] * mb[2] + mb[4];
+        let m10 = ma[5]
+            + 45.0 * (ma[4] * mb[1] + ma[1] * mb[4])
+            + 210.0 * (ma[3] * mb[2] + ma[2] * mb[3])
+            + mb[5];
+        let he = hermite32(y);
+        let s = m2 * INV_FACT_EVEN_F32[1] * he[1]
+            + m4 * INV_FACT_EVEN_F32[2] * he[3]
+            + m6 * INV_FACT_EVEN_F32[3] * he[5]
+            + m8 * INV_FACT_EVEN_F32[4] * he[7]
+            + m10 * INV_FACT_EVEN_F32[5] * he[9];
+        norm_cdf_f32(y) - norm_pdf_f32(y) * s
+    } else if bb < BETA_F32 {
+        let yp = y + 0.5 * aa;
+        let ym = y - 0.5 * aa;
+        let fa = (yp / aa).clamp(0.0, 1.0) + (e1_32(yp) - e1_32(ym)) / aa;
+        let mb = box_moments32(bb);
+        let tp = yp.clamp(-T_CLAMP_F32, T_CLAMP_F32);
+        let tm = ym.clamp(-T_CLAMP_F32, T_CLAMP_F32);
+        let (hp, hm) = (hermite32(tp), hermite32(tm));
+        let (pp, pm) = (norm_pdf_f32(tp), norm_pdf_f32(tm));
+        let mut s = 0.0f32;
+        for k in 1..=5 {
+            s += mb[k] * INV_FACT_EVEN_F32[k] * (hp[2 * k - 2] * pp - hm[2 * k - 2] * pm);
+        }
+        fa + s / aa
+    } else {
+        let h1 = 0.5 * (aa + bb);
+        let h2 = 0.5 * (aa - bb);
+        let d = (e2_32(y + h1) - e2_32(y + h2)) - (e2_32(y - h2) - e2_32(y - h1));
+        trap32(y, aa, bb) + d / (aa * bb)
+    }
+}
+
+/// f32 twin of [`cdf_gauss_box2`], the exact formulas of `pulse_cdf_gauss_box2` in
+/// `shaders/pulse.wgsl` (no f64 inside). Regimes as in the [module docs](self) with
+/// [`ALPHA_F32`], [`BETA_F32`]; inputs are clamped (`|x| <= 1e30`, widths `<= 1e30`,
+/// `s = max(sigma, 1e-9 max(|x|, a, b), 1e-30)`) so that no NaN or infinity can arise,
+/// also for `sigma = 0`, `a = b = 0` or `x = +-f32::MAX`.
+///
+/// Measured maximum absolute error against the f64 reference evaluated at the same f32
+/// inputs: 1.96e-7 (the test asserts < 2.5e-7), over the grid of `f32_twin_error_grid`:
+/// sigma in {1, 0.37}; a/sigma and b/sigma each in {0, 1e-4, 0.01, 0.1, 0.3, 0.49, 0.51, 0.9,
+/// 1.1, 2, 5, 30, 1e3, 1e4} (all 196 pairs, both sides of both switches); x at 201 points
+/// evenly over +-((a+b)/2 + 10 sigma) plus 28 points at -3..3 sigma around each trapezoid
+/// corner +-(a+b)/2, +-(a-b)/2. The jumps at the regime switches are below 2.4e-7.
+/// Not counted: the rounding of `x` itself to f32 (the renderer's `e_k - r0`), which costs
+/// up to `ulp(x) * max density <= ulp(x) / max(a, sigma sqrt(2 pi))`.
+pub fn cdf_gauss_box2_f32(x: f32, sigma: f32, a: f32, b: f32) -> f32 {
+    let x = x.clamp(-1e30, 1e30);
+    let a = a.abs().min(1e30);
+    let b = b.abs().min(1e30);
+    let m = x.abs().max(a).max(b);
+    let s = sigma.max(1e-9 * m).max(1e-30);
+    let (aa, bb) = if a >= b {
+        (a / s, b / s)
+    } else {
+        (b / s, a / s)
+    };
+    cdf_std32(x / s, aa, bb)
+}
+
+// ---------------------------------------------------------------------------------------
+// Sampled pulse
+// ---------------------------------------------------------------------------------------
+
+/// Footprints narrower than this many sample spacings are integrated knot by knot.
+const LOCAL_KNOTS: f64 = 8.0;
+
+/// A user-sampled pulse shape and the tables to evaluate `C = CDF of p * box_a * box_b`.
+///
+/// Interpolation: the samples `s_i >= 0` at `r_i = r_first + i dt` are joined piecewise
+/// linearly and the shape goes linearly to zero over one spacing beyond each end, i.e.
+/// `p(r) = sum_i s_i hat((r - r_i)/dt) / (dt sum_i s_i)` with the unit hat `hat(u) =
+/// max(1 - |u|, 0)`; the normalisation makes its area exactly 1. `P` (its CDF) is then
+/// piecewise quadratic with knots at `r_first + (j-1) dt`, `j = 0..=N+1`.
+///
+/// Tables at the knots: `p`, its slope on each interval, `P`, and the bounded first and
+/// second antiderivatives `E1(t) = int (P - H(. - mu))`, `E2(t) = int E1` taken relative to a
+/// unit step at the centroid `mu` (so `E1 -> 0`, `E2 -> Var/2` on the right). Between knots
+/// they are the exact polynomials.
+///
+/// Evaluation of `C(x)` (widths sorted `a >= b`, `h1 = (a+b)/2`, `h2 = (a-b)/2`):
+/// - `a <= 8 dt`: `C = int P(x - w) t(w) dw` with `t` the trapezoid density, integrated
+///   exactly piece by piece between the knots of `P` and of `t` (2-point Gauss-Legendre on
+///   cubic pieces); `a = 0` gives `P(x)`.
+/// - `b <= 8 dt < a`: `C = (1/b) int_{x-b/2}^{x+b/2} F_a(y) dy` (the mean of `F_a` over that
+///   window) with the single-box CDF
+///   `F_a(y) = clamp((y - mu + a/2)/a, 0, 1) + (E1(y + a/2) - E1(y - a/2))/a`, again exactly
+///   between its knots; `b = 0` gives `F_a(x)`.
+/// - `b > 8 dt`: `C = T(x - mu) + ((E2(x+h1) - E2(x+h2)) - (E2(x-h2) - E2(x-h1)))/(a b)` with
+///   `T` the trapezoid CDF, as for the Gaussian.
+#[derive(Debug, Clone)]
+pub struct SampledPulse {
+    /// Position of knot 0 (the zero pad before the first sample).
+    r0: f64,
+    dt: f64,
+    mu: f64,
+    var: f64,
+    p: Vec<f64>,
+    slope: Vec<f64>,
+    cdf: Vec<f64>,
+    e1: Vec<f64>,
+    e2: Vec<f64>,
+}
+
+enum Loc {
+    Left,
+    Right,
+    In(usize, f64),
+}
+
+impl SampledPulse {
+    /// Pulse from samples spaced `dt_range` apart (range units), placed so that its centroid
+    /// is at range 0 (as the centred Gaussian of [`cdf_gauss_box2`]).
+    pub fn new(samples: &[f64], dt_range: f64) -> Result<Self> {
+        let mu = Self::build(samples, dt_range, 0.0)?.mu;
+        Self::build(samples, dt_range, -mu)
+    }
+
+    /// Pulse whose first sample sits at range `r_first` (range units), the others at
+    /// `r_first + i dt_range`.
+    pub fn with_origin(samples: &[f64], dt_range: f64, r_first: f64) -> Result<Self> {
+        Self::build(samples, dt_range, r_first)
+    }
+
+    fn build(samples: &[f64], dt: f64, r_first: f64) -> Result<Self> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(Error::param("dt_range", dt, "finite and > 0"));
+        }
+        if !r_first.is_finite() {
+            return Err(Error::param("r_first", r_first, "finite"));
+        }
+        if samples.is_empty() {
+            return Err(Error::Shape("pulse samples: need at least one".into()));
+        }
+        if let Some(s) = samples.iter().find(|s| !(s.is_finite() && **s >= 0.0)) {
+            return Err(Error::param("pulse sample", s, "finite and >= 0"));
+        }
+        let total: f64 = samples.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return Err(Error::param(
+                "sum of pulse samples",
+                total,
+                "> 0 and finite",
+            ));
+        }
+        let n = samples.len() + 2;
+        let r0 = r_first - dt;
+        let mut p = vec![0.0; n];
+        for (pj, s) in p[1..n - 1].iter_mut().zip(samples) {
+            *pj = s / (total * dt);
+        }
+        let knot = |j: usize| r0 + j as f64 * dt;
+        // Centroid and variance of the hat sum (each hat adds dt^2/6).
+        let mu = (1..n - 1).map(|j| p[j] * dt * knot(j)).sum::<f64>();
+        let var = (1..n - 1)
+            .map(|j| p[j] * dt * (knot(j) - mu).powi(2))
+            .sum::<f64>()
+            + dt * dt / 6.0;
+        let mut slope = vec![0.0; n - 1];
+        let mut cdf = vec![0.0; n];
+        let mut e1 = vec![0.0; n];
+        let mut e2 = vec![0.0; n];
+        for j in 0..n - 1 {
+            let d = (p[j + 1] - p[j]) / dt;
+            slope[j] = d;
+            cdf[j + 1] = cdf[j] + dt * (p[j] + d * dt / 2.0);
+            let rj = knot(j);
+            let (h1, h2) = if rj >= mu {
+                (dt, dt * dt / 2.0)
+            } else {
+                let z = (knot(j + 1) - mu).max(0.0);
+                (z, z * z / 2.0)
+            };
+            e1[j + 1] = e1[j] + dt * (cdf[j] + dt * (p[j] / 2.0 + dt * d / 6.0)) - h1;
+            e2[j + 1] =
+                e2[j] + dt * (e1[j] + dt * (cdf[j] / 2.0 + dt * (p[j] / 6.0 + dt * d / 24.0))) - h2;
+        }
+        Ok(Self {
+            r0,
+            dt,
+            mu,
+            var,
+            p,
+            slope,
+            cdf,
+            e1,
+            e2,
+        })
+    }
+
+    /// Centroid of the interpolated pulse (range units).
+    pub fn centroid(&self) -> f64 {
+        self.mu
+    }
+
+    /// Variance of the interpolated pulse (range units squared).
+    pub fn variance(&self) -> f64 {
+        self.var
+    }
+
+    fn knot(&self, j: usize) -> f64 {
+        self.r0 + j as f64 * self.dt
+    }
+
+    fn r_end(&self) -> f64 {
+        self.knot(self.p.len() - 1)
+    }
+
+    fn locate(&self, t: f64) -> Loc {
+        let u = (t - self.r0) / self.dt;
+        let last = (self.p.len() - 1) as f64;
+        if u.is_nan() || u <= 0.0 {
+            Loc::Left
+        } else if u >= last {
+            Loc::Right
+        } else {
+            let j = (u.floor() as usize).min(self.p.len() - 2);
+            Loc::In(j, t - self.knot(j))
+        }
+    }
+
+    /// The CDF `P(t)` of the interpolated pulse.
+    pub fn pulse_cdf(&self, t: f64) -> f64 {
+        match self.locate(t) {
+            Loc::Left => 0.0,
+            Loc::Right => 1.0,
+            Loc::In(j, s) => self.cdf[j] + s * (self.p[j] + s * self.slope[j] / 2.0),
+        }
+    }
+
+    fn e1_at(&self, t: f64) -> f64 {
+        match self.locate(t) {
+            Loc::Left => 0.0,
+            Loc::Right => self.e1[self.e1.len() - 1],
+            Loc::In(j, s) => {
+                let h = if self.knot(j) >= self.mu {
+                    s
+                } else {
+                    (t - self.mu).max(0.0)
+                };
+                self.e1[j] + s * (self.cdf[j] + s * (self.p[j] / 2.0 + s * self.slope[j] / 6.0)) - h
+            }
+        }
+    }
+
+    fn e2_at(&self, t: f64) -> f64 {
+        match self.locate(t) {
+            Loc::Left => 0.0,
+            Loc::Right => self.e2[self.e2.len() - 1],
+            Loc::In(j, s) => {
+                let h = if self.knot(j) >= self.mu {
+                    s * s / 2.0
+                } else {
+                    let z = (t - self.mu).max(0.0);
+                    z * z / 2.0
+                };
+                self.e2[j]
+                    + s * (self.e1[j]
+                        + s * (self.cdf[j] / 2.0
+                            + s * (self.p[j] / 6.0 + s * self.slope[j] / 24.0)))
+                    - h
+            }
+        }
+    }
+
+    /// Knot positions `r_j + shift` strictly inside `(lo, hi)`, pushed onto `out`.
+    fn push_knots(&self, lo: f64, hi: f64, shift: f64, out: &mut Vec<f64>) {
+        let n = self.p.len();
+        let jlo = ((lo - shift - self.r0) / self.dt).floor().max(0.0);
+        let jhi = ((hi - shift - self.r0) / self.dt)
+            .ceil()
+            .min((n - 1) as f64);
+        if !(jlo <= jhi) {
+            return;
+        }
+        for j in jlo as usize..=jhi as usize {
+            let k = self.knot(j) + shift;
+            if k > lo && k < hi {
+                out.push(k);
+            }
+        }
+    }
+
+    /// CDF at `x` of this pulse convolved with boxes of widths `a` and `b` (range units; the
+    /// widths' signs are ignored). f64; see the type docs for the regimes.
+    pub fn cdf_box2(&self, x: f64, a: f64, b: f64) -> f64 {
+        let (a, b) = if a.abs() >= b.abs() {
+            (a.abs(), b.abs())
+        } else {
+            (b.abs(), a.abs())
+        };
+        let h1 = 0.5 * (a + b);
+        let h2 = 0.5 * (a - b);
+        if x - h1 >= self.r_end() {
+            return 1.0;
+        }
+        if x + h1 <= self.r0 {
+            return 0.0;
+        }
+        let kdt = LOCAL_KNOTS * self.dt;
+        if b > kdt {
+            let d = (self.e2_at(x + h1) - self.e2_at(x + h2))
+                - (self.e2_at(x - h2) - self.e2_at(x - h1));
+            trap64(x - self.mu, a, b) + d / (a * b)
+        } else if a > kdt {
+            let fa = |y: f64| {
+                ((y - self.mu + 0.5 * a) / a).clamp(0.0, 1.0)
+                    + (self.e1_at(y + 0.5 * a) - self.e1_at(y - 0.5 * a)) / a
+            };
+            let (lo, hi) = (x - 0.5 * b, x + 0.5 * b);
+            // The mean over the window as represented: divide by hi - lo, not b (they differ
+            // by ulp(x), which matters when b is tiny).
+            if !(hi > lo) {
+                return fa(x);
+            }
+            let mut bp = vec![lo, hi];
+            for k in [self.mu - 0.5 * a, self.mu + 0.5 * a] {
+                if k > lo && k < hi {
+                    bp.push(k);
+                }
+            }
+            self.push_knots(lo, hi, -0.5 * a, &mut bp);
+            self.push_knots(lo, hi, 0.5 * a, &mut bp);
+            integrate_pieces(&mut bp, fa) / (hi - lo)
+        } else {
+            if a == 0.0 {
+                return self.pulse_cdf(x);
+            }
+            let dens = |w: f64| {
+                let aw = w.abs();
+                if aw <= h2 {
+                    1.0 / a
+                } else {
+                    ((h1 - aw) / (a * b)).max(0.0)
+                }
+            };
+            let mut bp = vec![-h1, h1];
+            if b > 0.0 {
+                bp.push(-h2);
+                bp.push(h2);
+            }
+            // Knots of P(x - w) in w: w = x - r_j.
+            let mut ks = Vec::new();
+            self.push_knots(x - h1, x + h1, 0.0, &mut ks);
+            bp.extend(ks.iter().map(|k| x - k));
+            integrate_pieces(&mut bp, |w| self.pulse_cdf(x - w) * dens(w))
+        }
+    }
+
+    /// Bin weights of one pixel for this pulse, as [`bin_weights_f64`].
+    pub fn bin_weights(&self, r0: f64, a: f64, b: f64, edges: &[f64], out: &mut [f64]) {
+        assert_eq!(out.len() + 1, edges.len(), "need one more edge than bins");
+        let mut prev = self.cdf_box2(edges[0] - r0, a, b);
+        for (o, &e) in out.iter_mut().zip(&edges[1..]) {
+            let c = self.cdf_box2(e - r0, a, b);
+            *o = c - prev;
+            prev = c;
+        }
+    }
+}
+
+/// Sum over consecutive breakpoints of the 2-point Gauss-Legendre rule (exact for cubics).
+fn integrate_pieces(bp: &mut [f64], f: impl Fn(f64) -> f64) -> f64 {
+    bp.sort_by(|p, q| p.total_cmp(q));
+    let g = 0.5 / 3f64.sqrt();
+    let mut sum = 0.0;
+    for w in bp.windows(2) {
+        let (lo, hi) = (w[0], w[1]);
+        let h = hi - lo;
+        if h <= 0.0 {
+            continue;
+        }
+        let mid = 0.5 * (lo + hi);
+        sum += 0.5 * h * (f(mid - g * h) + f(mid + g * h));
+    }
+    sum
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::quad::integrate;
+
+    const GL: usize = 16;
+
+    /// Integral of `f` over [lo, hi] split at the given points (those inside), GL on each piece.
+    fn split_integral(lo: f64, hi: f64, splits: &[f64], f: impl Fn(f64) -> f64) -> f64 {
+        let mut bp: Vec<f64> = splits
+            .iter()
+            .copied()
+            .filter(|&s| s > lo && s < hi)
+            .collect();
+        bp.push(lo);
+        bp.push(hi);
+        bp.sort_by(|p, q| p.total_cmp(q));
+        bp.windows(2).map(|w| integrate(GL, w[0], w[1], &f)).sum()
+    }
+
+    /// Brute force: the mean over u, v of Phi((x - u - v)/sigma), split every sigma around
+    /// the transitions so that each piece is smooth on the scale of the GL rule.
+    fn brute_gauss(x: f64, sigma: f64, a: f64, b: f64) -> f64 {
+        let ks: Vec<f64> = (-12..=12).map(|k| k as f64 * sigma).collect();
+        let phi = |t: f64| norm_cdf(t / sigma);
+        let inner = |u: f64| -> f64 {
+            if b == 0.0 {
+                return phi(x - u);
+            }
+            let c = x - u;
+            let sp: Vec<f64> = ks.iter().map(|k| c + k).collect();
+            split_integral(-0.5 * b, 0.5 * b, &sp, |v| phi(c - v)) / b
+        };
+        if a == 0.0 {
+            return inner(0.0);
+        }
+        let mut sp: Vec<f64> = ks.iter().map(|k| x + k).collect();
+        sp.extend(ks.iter().map(|k| x + 0.5 * b + k));
+        sp.extend(ks.iter().map(|k| x - 0.5 * b + k));
+        split_integral(-0.5 * a, 0.5 * a, &sp, inner) / a
+    }
+
+    /// (a, b) in sigma units covering every regime and both sides of every switch.
+    const REGIMES: [(f64, f64); 18] = [
+        (0.0, 0.0),
+        (1e-6, 0.0),
+        (1e-3, 1e-4),
+        (0.1, 0.05),
+        (0.124, 0.124),
+        (0.126, 0.01),
+        (0.3, 0.0),
+        (0.6, 0.39),
+        (0.6, 0.41),
+        (1.0, 1.0),
+        (3.0, 0.2),
+        (10.0, 0.5),
+        (100.0, 37.0),
+        (1e4, 1e4),
+        (1e4, 1.0),
+        (1e4, 1e-3),
+        (1e4, 0.0),
+        (0.0, 2.0),
+    ];
+
+    fn x_grid(sigma: f64, a: f64, b: f64, n: usize) -> Vec<f64> {
+        let h1 = 0.5 * (a + b);
+        let h2 = 0.5 * (a - b).abs();
+        let mut xs: Vec<f64> = (0..n)
+            .map(|i| (-1.0 + 2.0 * i as f64 / (n - 1) as f64) * (h1 + 10.0 * sigma))
+            .collect();
+        for c in [-h1, -h2, h2, h1] {
+            for d in [-3.0, -1.0, -0.3, 0.0, 0.3, 1.0, 3.0] {
+                xs.push(c + d * sigma);
+            }
+        }
+        xs
+    }
+
+    #[test]
+    fn gauss_matches_brute_force_in_every_regime() {
+        let sigma = 0.7;
+        let mut worst = 0.0f64;
+        for (a, b) in REGIMES {
+            let (a, b) = (a * sigma, b * sigma);
+            let mut w = 0.0f64;
+            for x in x_grid(sigma, a, b, 21) {
+                let c = cdf_gauss_box2(x, sigma, a, b);
+                let r = brute_gauss(x, sigma, a, b);
+                w = w.max((c - r).abs());
+            }
+            eprintln!(
+                "a/s {:e} b/s {:e}: max |C - brute| = {w:.2e}",
+                a / sigma,
+                b / sigma
+            );
+            worst = worst.max(w);
+        }
+        eprintln!("worst {worst:.2e}");
+        assert!(worst < 3e-15, "worst {worst:e}");
+    }
+
+    #[test]
+    fn norm_cdf_matches_tabulated_values() {
+        // Phi to 25 digits (Wolfram), checked relatively so that the tails count.
+        let table = [
+            (1.0, 0.8413447460685429485852325),
+            (0.5, 0.6914624612740131036377046),
+            (-1.0, 0.1586552539314570514147675),
+            (-3.0, 1.349898031630094526651814e-3),
+            (-5.0, 2.866515718791939116737523e-7),
+            (-10.0, 7.619853024160526065973343e-24),
+            (-20.0, 2.753624118606233695075e-89),
+        ];
+        for (x, want) in table {
+            // The rounding of x/sqrt 2 alone costs ~x^2 eps relative in the tail.
+            let rel = (norm_cdf(x) / want - 1.0).abs();
+            assert!(rel < 2e-16 * (8.0 + x * x), "Phi({x}): rel {rel:e}");
+        }
+        // The reason for libm: statrs 0.19's erfc is off by ~1e-11 here.
+        let statrs_phi1 = 0.5 * statrs::function::erf::erfc(-std::f64::consts::FRAC_1_SQRT_2);
+        assert!((statrs_phi1 - 0.8413447460685429).abs() > 1e-12);
+    }
+
+    #[test]
+    fn gauss_monotone_with_limits_0_and_1() {
+        let sigma = 1.3;
+        for (a, b) in REGIMES {
+            let (a, b) = (a * sigma, b * sigma);
+            let h1 = 0.5 * (a + b) + 12.0 * sigma;
+            let n = 4001;
+            let mut prev = 0.0;
+            for i in 0..n {
+                let x = -h1 + 2.0 * h1 * i as f64 / (n - 1) as f64;
+                let c = cdf_gauss_box2(x, sigma, a, b);
+                assert!((0.0..=1.0).contains(&c), "C({x}) = {c}");
+                assert!(c >= prev - 1e-15, "a {a} b {b}: C({x}) = {c} < {prev}");
+                prev = c;
+            }
+            assert!(cdf_gauss_box2(-h1, sigma, a, b) < 1e-30);
+            assert!(cdf_gauss_box2(h1, sigma, a, b) > 1.0 - 1e-15);
+            for (x, want) in [
+                (-1e300, 0.0),
+                (1e300, 1.0),
+                (f64::NEG_INFINITY, 0.0),
+                (f64::INFINITY, 1.0),
+            ] {
+                assert_eq!(cdf_gauss_box2(x, sigma, a, b), want);
+            }
+        }
+    }
+
+    /// Largest jump of `f(y, lo side)` vs `f(y, hi side)` over y in [-12, 12].
+    fn max_jump(f: impl Fn(f64, bool) -> f64) -> f64 {
+        (0..=2400)
+            .map(|i| -12.0 + 0.01 * i as f64)
+            .map(|y| (f(y, false) - f(y, true)).abs())
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn gauss_continuous_across_regime_switches() {
+        // The largest float below the switch (so that the jump is not a change of the input).
+        let lo = |t: f64| f64::from_bits(t.to_bits() - 1);
+        let mut worst = 0.0f64;
+        // A crosses ALPHA (series in both widths <-> exact box and series in B).
+        for bb in [0.0, 0.01, 0.06, ALPHA_F64] {
+            let j = max_jump(|y, hi| {
+                let aa = if hi { ALPHA_F64 } else { lo(ALPHA_F64) };
+                cdf_std64(y, aa, bb.min(aa))
+            });
+            eprintln!("f64 A = ALPHA, B = {bb}: jump {j:.2e}");
+            worst = worst.max(j);
+        }
+        // B crosses BETA (series in B <-> trapezoid + second difference).
+        for aa in [BETA_F64, 0.5, 1.0, 10.0, 1e4] {
+            let j = max_jump(|y, hi| cdf_std64(y, aa, if hi { BETA_F64 } else { lo(BETA_F64) }));
+            eprintln!("f64 B = BETA, A = {aa}: jump {j:.2e}");
+            worst = worst.max(j);
+        }
+        assert!(worst < 2e-15, "worst jump {worst:e}");
+
+        let lo32 = |t: f32| f32::from_bits(t.to_bits() - 1);
+        let mut worst32 = 0.0f64;
+        for bb in [0.0f32, 0.05, 0.3, ALPHA_F32] {
+            let j = max_jump(|y, hi| {
+                let aa = if hi { ALPHA_F32 } else { lo32(ALPHA_F32) };
+                cdf_std32(y as f32, aa, bb.min(aa)) as f64
+            });
+            eprintln!("f32 A = ALPHA, B = {bb}: jump {j:.2e}");
+            worst32 = worst32.max(j);
+        }
+        for aa in [BETA_F32, 2.0, 10.0, 1e4] {
+            let j = max_jump(|y, hi| {
+                cdf_std32(y as f32, aa, if hi { BETA_F32 } else { lo32(BETA_F32) }) as f64
+            });
+            eprintln!("f32 B = BETA, A = {aa}: jump {j:.2e}");
+            worst32 = worst32.max(j);
+        }
+        assert!(worst32 < 4e-7, "worst f32 jump {worst32:e}");
+    }
+
+    #[test]
+    fn bin_weights_telescope() {
+        let (sigma, r0) = (0.15, 10.0);
+        for (a, b) in [
+            (0.0, 0.0),
+            (0.05, 0.01),
+            (0.3, 0.0),
+            (2.0, 0.7),
+            (40.0, 0.2),
+        ] {
+            // Uneven edges covering the support, then a window cutting it.
+            let mut edges = vec![r0 - 25.0];
+            let mut e = r0 - 25.0;
+            let mut k = 0u32;
+            while e < r0 + 25.0 {
+                k += 1;
+                e += 0.013 + 0.02 * ((k as f64 * 0.7).sin() + 1.0);
+                edges.push(e);
+            }
+            let mut out = vec![0.0; edges.len() - 1];
+            bin_weights_f64(r0, a, b, sigma, &edges, &mut out);
+            let sum: f64 = out.iter().sum();
+            assert!((sum - 1.0).abs() < 1e-13, "sum {sum}");
+            assert!(out.iter().all(|&w| w >= -1e-16));
+            let cut = &edges[100..edges.len() - 300];
+            let mut out = vec![0.0; cut.len() - 1];
+            bin_weights_f64(r0, a, b, sigma, cut, &mut out);
+            let want = cdf_gauss_box2(cut[cut.len() - 1] - r0, sigma, a, b)
+                - cdf_gauss_box2(cut[0] - r0, sigma, a, b);
+            let sum: f64 = out.iter().sum();
+            assert!((sum - want).abs() < 1e-13, "sum {sum} want {want}");
+        }
+    }
+
+    #[test]
+    fn erfc_f32_relative_error() {
+        // Relative error on [0, 9] measured against libm's f64 erfc; past ~2 it is dominated
+        // by the f32 rounding of z^2 inside exp(-z^2 + ..), i.e. grows like z^2 * 6e-8.
+        let (mut near, mut scaled, mut neg) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..=9000 {
+            let x = i as f32 * 1e-3;
+            let rel = (erfc_f32(x) as f64 / libm::erfc(x as f64) - 1.0).abs();
+            if x <= 1.0 {
+                near = near.max(rel);
+            }
+            scaled = scaled.max(rel / (1.0 + (x * x) as f64));
+            // Negative side, 2 - erfc: absolute.
+            neg = neg.max((erfc_f32(-x) as f64 - libm::erfc(-x as f64)).abs());
+        }
+        eprintln!("erfc_f32: rel {near:.2e} on [0, 1], rel/(1+x^2) {scaled:.2e} on [0, 9], abs {neg:.2e} on [-9, 0]");
+        assert!(near < 3.5e-7 && scaled < 3.5e-7 && neg < 3.5e-7);
+    }
+
+    /// The grid on which the f32 twin's error is measured (and quoted in its docs): sigma in
+    /// {1, 0.37}, a/sigma and b/sigma each in WIDTHS (all 196 pairs), x on x_grid(.., 201)
+    /// (201 points over +-(h1 + 10 sigma) plus 28 points around the trapezoid's corners).
+    const WIDTHS: [f64; 14] = [
+        0.0, 1e-4, 0.01, 0.1, 0.3, 0.49, 0.51, 0.9, 1.1, 2.0, 5.0, 30.0, 1e3, 1e4,
+    ];
+
+    #[test]
+    fn f32_twin_error_grid() {
+        let mut worst = 0.0f64;
+        let mut at = (0.0, 0.0, 0.0, 0.0);
+        for sigma in [1.0f64, 0.37] {
+            for wa in WIDTHS {
+                for wb in WIDTHS {
+                    let (a, b) = ((wa * sigma) as f32, (wb * sigma) as f32);
+                    for x in x_grid(sigma, a as f64, b as f64, 201) {
+                        let x = x as f32;
+                        let c32 = cdf_gauss_box2_f32(x, sigma as f32, a, b) as f64;
+                        let c64 = cdf_gauss_box2(x as f64, sigma as f32 as f64, a as f64, b as f64);
+                        let e = (c32 - c64).abs();
+                        if e > worst {
+                            worst = e;
+                            at = (x as f64, sigma, wa, wb);
+                        }
+                    }
+                }
+            }
+        }
+        eprintln!("f32 twin: max |C32 - C64| = {worst:.3e} at (x, sigma, a/s, b/s) = {at:?}");
+        assert!(worst < MEASURED_F32_BOUND, "{worst:e} at {at:?}");
+    }
+
+    /// The bound quoted in the docs of [`cdf_gauss_box2_f32`].
+    const MEASURED_F32_BOUND: f64 = 2.5e-7;
+
+    #[test]
+    fn f32_never_nan_or_inf() {
+        let xs = [
+            0.0f32,
+            1e-38,
+            1e-20,
+            1.0,
+            1e20,
+            1e30,
+            f32::MAX,
+            f32::INFINITY,
+        ];
+        let sig = [0.0f32, 1e-45, 1e-38, 1e-30, 1e-10, 1.0, 1e30, f32::MAX];
+        let ws = [0.0f32, 1e-45, 1e-38, 1e-10, 0.7, 1.0, 3.0, 1e30, f32::MAX];
+        for &x in &xs {
+            for x in [x, -x] {
+                for &s in &sig {
+                    for &a in &ws {
+                        for &b in &ws {
+                            let c = cdf_gauss_box2_f32(x, s, a, b);
+                            assert!(
+                                c.is_finite() && (-1e-6..=1.0 + 1e-6).contains(&c),
+                                "f32 C({x}, {s}, {a}, {b}) = {c}"
+                            );
+                            let c = cdf_gauss_box2(x as f64, s as f64, a as f64, b as f64);
+                            assert!(
+                                c.is_finite() && (0.0..=1.0).contains(&c),
+                                "f64 C({x}, {s}, {a}, {b}) = {c}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        // sigma = 0 is the trapezoid (a box for b = 0, a step for a = b = 0).
+        assert_eq!(cdf_gauss_box2(0.25, 0.0, 1.0, 0.0), 0.75);
+        assert_eq!(cdf_gauss_box2(1e-3, 0.0, 0.0, 0.0), 1.0);
+        assert_eq!(cdf_gauss_box2_f32(0.25, 0.0, 1.0, 0.0), 0.75);
+    }
+
+    #[test]
+    fn wgsl_parses_and_validates() {
+        let src = include_str!("../../shaders/pulse.wgsl");
+        let module = naga::front::wgsl::parse_str(src).expect("pulse.wgsl parses");
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::all(),
+        )
+        .validate(&module)
+        .expect("pulse.wgsl validates");
+        // It needs no optional capability either.
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .expect("pulse.wgsl validates without capabilities");
+        assert!(module
+            .functions
+            .iter()
+            .any(|(_, f)| f.name.as_deref() == Some("pulse_cdf_gauss_box2")));
+    }
+
+    // --- sampled pulse ---
+
+    /// Brute force for a sampled pulse: the mean over u, v of P(x - u - v), split at every
+    /// knot of the integrand so that GL is exact on each piece.
+    fn brute_sampled(sp: &SampledPulse, x: f64, a: f64, b: f64) -> f64 {
+        let knots: Vec<f64> = (0..sp.p.len()).map(|j| sp.knot(j)).collect();
+        let inner = |u: f64| -> f64 {
+            let c = x - u;
+            if b == 0.0 {
+                return sp.pulse_cdf(c);
+            }
+            let spl: Vec<f64> = knots.iter().map(|k| c - k).collect();
+            split_integral(-0.5 * b, 0.5 * b, &spl, |v| sp.pulse_cdf(c - v)) / b
+        };
+        if a == 0.0 {
+            return inner(0.0);
+        }
+        let mut spl: Vec<f64> = knots.iter().map(|k| x - k).collect();
+        spl.extend(knots.iter().map(|k| x - k + 0.5 * b));
+        spl.extend(knots.iter().map(|k| x - k - 0.5 * b));
+        split_integral(-0.5 * a, 0.5 * a, &spl, inner) / a
+    }
+
+    const SAMPLES: [f64; 7] = [0.3, 1.0, 2.5, 0.0, 1.7, 4.0, 0.6];
+
+    #[test]
+    fn sampled_exact_against_brute_force() {
+        let dt = 0.37;
+        let sp = SampledPulse::with_origin(&SAMPLES, dt, 3.1).unwrap();
+        let k = LOCAL_KNOTS * dt;
+        let widths = [
+            0.0,
+            1e-9 * dt,
+            0.3 * dt,
+            3.0 * dt,
+            k * (1.0 - 1e-9),
+            k * (1.0 + 1e-9),
+            30.0 * dt,
+            1e4 * dt,
+        ];
+        let mut worst = 0.0f64;
+        for a in widths {
+            for b in widths {
+                let h1 = 0.5 * (a + b);
+                for i in 0..=60 {
+                    let x = 3.1 - h1 - 2.0 * dt + (2.0 * h1 + 10.0 * dt) * i as f64 / 60.0;
+                    let c = sp.cdf_box2(x, a, b);
+                    let r = brute_sampled(&sp, x, a, b);
+                    worst = worst.max((c - r).abs());
+                    assert!((c - r).abs() < 1e-14, "a {a} b {b} x {x}: {c} vs {r}");
+                }
+            }
+        }
+        eprintln!("sampled vs brute force: {worst:.2e}");
+    }
+
+    #[test]
+    fn sampled_continuous_across_regime_switches() {
+        let dt = 0.37;
+        let sp = SampledPulse::with_origin(&SAMPLES, dt, -1.0).unwrap();
+        let k = LOCAL_KNOTS * dt;
+        let below = f64::from_bits(k.to_bits() - 1);
+        let mut worst = 0.0f64;
+        for (a_lo, a_hi, b_lo, b_hi) in [
+            (below, k, 0.0, 0.0),
+            (below, k, 0.5 * dt, 0.5 * dt),
+            (below, k, below, below),
+            (50.0 * dt, 50.0 * dt, below, k),
+            (k, k, below, k),
+        ] {
+            for i in 0..=400 {
+                let x = -1.0 - 10.0 * k + 20.0 * k * i as f64 / 400.0;
+                let j = (sp.cdf_box2(x, a_lo, b_lo) - sp.cdf_box2(x, a_hi, b_hi)).abs();
+                worst = worst.max(j);
+            }
+        }
+        eprintln!("sampled: largest jump at the switches {worst:.2e}");
+        assert!(worst < 3e-15, "{worst:e}");
+    }
+
+    #[test]
+    fn sampled_fine_gaussian_reproduces_gauss() {
+        // Gaussian sampled every sigma/50 over +-10 sigma: the piecewise-linear interpolation
+        // changes the CDF by about dt^2/12 max|p'| = 8e-6 (sigma units), the bound checked.
+        let sigma = 0.8;
+        let dt = sigma / 50.0;
+        let samples: Vec<f64> = (-500..=500)
+            .map(|i| norm_pdf(i as f64 * dt / sigma))
+            .collect();
+        let sp = SampledPulse::new(&samples, dt).unwrap();
+        assert!(sp.centroid().abs() < 1e-13);
+        assert!((sp.variance() / (sigma * sigma) - 1.0).abs() < 1e-3);
+        let mut worst = 0.0f64;
+        for (a, b) in REGIMES {
+            let (a, b) = (a * sigma, b * sigma);
+            for x in x_grid(sigma, a, b, 81) {
+                let e = (sp.cdf_box2(x, a, b) - cdf_gauss_box2(x, sigma, a, b)).abs();
+                worst = worst.max(e);
+            }
+        }
+        eprintln!("fine sampled Gaussian vs closed form: {worst:.2e}");
+        assert!(worst < 1e-5, "{worst:e}");
+    }
+
+    #[test]
+    fn sampled_bin_weights_sum_to_one_and_errors() {
+        let sp = SampledPulse::new(&SAMPLES, 0.25).unwrap();
+        let edges: Vec<f64> = (0..=400).map(|i| -50.0 + 0.25 * i as f64).collect();
+        for (a, b) in [(0.0, 0.0), (0.1, 0.0), (1.0, 0.3), (10.0, 0.2), (30.0, 7.0)] {
+            let mut out = vec![0.0; edges.len() - 1];
+            sp.bin_weights(0.0, a, b, &edges, &mut out);
+            let sum: f64 = out.iter().sum();
+            assert!((sum - 1.0).abs() < 1e-13, "sum {sum}");
+            assert!(out.iter().all(|&w| w > -1e-15));
+        }
+        assert!(SampledPulse::new(&[], 1.0).is_err());
+        assert!(SampledPulse::new(&[0.0, 0.0], 1.0).is_err());
+        assert!(SampledPulse::new(&[1.0, -1.0], 1.0).is_err());
+        assert!(SampledPulse::new(&[1.0], 0.0).is_err());
+        assert!(SampledPulse::new(&[1.0, f64::NAN], 1.0).is_err());
+        // One sample: a hat of half-width dt.
+        let hat = SampledPulse::new(&[2.0], 1.0).unwrap();
+        assert!((hat.pulse_cdf(-0.5) - 0.125).abs() < 1e-15);
+        assert!((hat.variance() - 1.0 / 6.0).abs() < 1e-15);
+    }
+}
