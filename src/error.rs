@@ -18,6 +18,9 @@ pub enum Error {
     /// A direction is not usable (not finite, not unit length, below the horizon).
     #[error("invalid {name}: {reason}")]
     InvalidDirection { name: &'static str, reason: String },
+    /// No usable graphics device, or the device failed (validation, out of memory).
+    #[error("device: {0}")]
+    Device(String),
 }
 
 impl Error {

@@ -22,13 +22,19 @@ import numpy as np
 
 from . import _core
 from ._core import BrdfTable, Error, Material, __version__, brdf_table
-from . import models
+from .lidar import SPEED_OF_LIGHT, Lidar, RenderResult, Scene, device_info, render
 
 __all__ = [
     "BrdfTable",
     "Error",
+    "Lidar",
     "Material",
     "MonostaticTable",
+    "RenderResult",
+    "SPEED_OF_LIGHT",
+    "Scene",
+    "device_info",
+    "render",
     "__version__",
     "albedo",
     "brdf",
@@ -153,3 +159,12 @@ def monostatic_table(
     in the table coordinate, as in ``src/brdf/table.rs``."""
     theta, mueller, secs, err = _core.monostatic_table(material, int(nodes), int(double_order), bool(measure))
     return MonostaticTable(theta=theta, mueller=mueller, build_seconds=secs, max_error=err)
+
+
+def __getattr__(name: str) -> object:
+    # pprender.models imports trimesh (about 0.5 s): load it on first use.
+    if name == "models":
+        import importlib
+
+        return importlib.import_module(".models", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

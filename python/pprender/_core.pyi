@@ -233,3 +233,39 @@ def brdf_table(
     scale_double: float | None = None,
     frame: str = "bisector",
 ) -> BrdfTable: ...
+
+@final
+class RenderScene:
+    """Mesh + materials + cached GPU tables (wrapped by ``pprender.Scene``)."""
+
+    def __new__(
+        cls,
+        vertices: npt.NDArray[np.float64],
+        faces: npt.NDArray[np.int64],
+        face_material: npt.NDArray[np.int64],
+        materials: list[Material],
+        normals: npt.NDArray[np.float64] | None = None,
+    ) -> RenderScene: ...
+    @property
+    def radius(self) -> float: ...
+    @property
+    def n_faces(self) -> int: ...
+    def prepare(self, bistatic_angle: float) -> float: ...
+    def render(
+        self,
+        rotations: npt.NDArray[np.float64],
+        *,
+        resolution: int,
+        supersampling: int,
+        bistatic_angle: float,
+        polarization: Sequence[float] | None,
+        sigma_range: float,
+        bin_width: float,
+        image: bool,
+        range: bool,
+        profile: bool,
+        device: str,
+    ) -> dict[str, Any]: ...
+
+def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+def device_info(device: str = "auto") -> dict[str, Any]: ...

@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 pub mod brdf;
 mod polarimetry;
 mod reference;
+mod render;
 mod seed;
 
 pyo3::create_exception!(
@@ -28,5 +29,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     polarimetry::register(m)?;
     seed::register(m)?;
     reference::register(m)?;
+    render::register(m)?;
     Ok(())
 }

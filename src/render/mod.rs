@@ -1,1 +1,167 @@
+//! The lidar renderer: Mueller/Stokes images, range maps and range-resolved pulse profiles
+//! of a mesh under a batch of attitudes, on wgpu (a GPU, or Mesa's lavapipe on the CPU).
+//!
+//! # Conventions (the one place they are written down)
+//!
+//! **Units.** Lengths in metres, times in seconds, angles in radians, cross-sections in m^2.
+//!
+//! **Telescope frame.** Right-handed `(X, Y, Z)`: `Z` points from the target toward the
+//! receiver, `X` to the right and `Y` up in the image. The receiver direction is
+//! `wo = Z`; the transmitter direction is `wi = (sin beta, 0, cos beta)` for the bistatic
+//! angle `beta` (transmitter displaced toward `+X`; `beta = 0` is monostatic).
+//!
+//! **Attitudes.** A rotation `R` maps body-frame coordinates to the telescope frame,
+//! `p_tel = R p_body`; the body origin is the range reference point. Quaternions are
+//! `(w, x, y, z)` (scalar first, as `R = rotation of the body`); they are normalized, and
+//! refused when their norm is off by more than `1e-6` relative or not finite.
+//!
+//! **Image.** The orthographic image square spans `[-ext, ext]` in `X` and `Y`, `ext` the
+//! radius of the mesh's bounding sphere about the body origin (so every attitude fits).
+//! Row 0 is the top (`Y = +ext`), column 0 the left (`X = -ext`); pixel `(i, j)` has its
+//! centre at `X = -ext + (j + 1/2) delta`, `Y = ext - (i + 1/2) delta`, `delta = 2 ext / W`.
+//! Visibility is sampled at pixel centres (rasterization); a pixel counts fully for its
+//! centre's triangle.
+//!
+//! **Range.** The one-way range of a surface point `p` relative to the body origin is
+//! `r = -p . (wi + wo) / 2` (half the extra round-trip path; `r = -Z` monostatic): positive
+//! is farther from the sensor. The profile's time axis is `t = 2 r / c`.
+//!
+//! **Stokes bases.** The received beam propagates along `+Z`: basis `(X, Y)`. The
+//! transmitted beam propagates along `k_in = -wi`: basis `x_in = normalize(k_in x Y)`
+//! (`= X` monostatic), `y_in = k_in x x_in` (`= -Y` monostatic). Both are right-handed
+//! about their propagation direction, as every beam in [`crate::optics`] (so `V > 0` has
+//! the same meaning for both beams, and a mirror facing the sensor is
+//! `R diag(1, 1, -1, -1)`: a linear state along `X` returns along `X`; `+45 deg` in the
+//! transmit basis (toward `X - Y`) returns as `-45 deg` in the receive basis, the same
+//! physical direction).
+//!
+//! **Cross-section.** A pixel's differential lidar cross-section is
+//! `dsigma = 4 pi f(wi, wo) cos(theta_i) delta^2` (Mueller matrix, m^2) with `f` the BRDF
+//! in the bases above and `delta^2` the pixel's area projected along `wo` (so that
+//! `dA cos(theta_o) = delta^2`). Lambertian sphere check: `sigma = 8/3 pi a^2 rho`.
+//!
+//! **Profile.** Within a pixel the range is `r0 + gx u + gy v` (its plane; `u, v` across
+//! the pixel), a trapezoid of widths `a = |gx| delta`, `b = |gy| delta`; convolved with
+//! the received pulse (range FWHM `c tau / 2`) and integrated over each bin
+//! ([`pulse`]). The bins cover the bounding sphere plus the pulse support, so the weights
+//! of every pixel sum to one and the profile sums to the total cross-section.
+
+pub mod geometry;
+pub mod gpu;
 pub mod pulse;
+pub mod tables;
+pub mod twin;
+
+/// Speed of light in vacuum (m/s).
+pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
+
+/// WGSL sources (one kernel per file; `pulse.wgsl` holds functions included into shade).
+pub mod shaders {
+    pub const VISIBILITY: &str = include_str!("../../shaders/visibility.wgsl");
+    pub const SHADE: &str = include_str!("../../shaders/shade.wgsl");
+    pub const PULSE: &str = include_str!("../../shaders/pulse.wgsl");
+
+    /// The complete shade module (pulse functions + kernel).
+    pub fn shade_module() -> String {
+        format!("{PULSE}\n{SHADE}")
+    }
+}
+
+use crate::error::{Error, Result};
+
+/// Largest image side (resolution x supersampling) accepted.
+pub const MAX_IMAGE_SIDE: usize = 8192;
+
+/// Validate a sensor set-up (every parameter named with its allowed range).
+pub fn check_sensor(s: &gpu::SensorSetup) -> Result<()> {
+    if s.resolution < 1 || s.resolution > MAX_IMAGE_SIDE {
+        return Err(Error::param(
+            "resolution",
+            s.resolution,
+            format!("an integer in [1, {MAX_IMAGE_SIDE}]"),
+        ));
+    }
+    if s.supersampling < 1 || s.resolution * s.supersampling > MAX_IMAGE_SIDE {
+        return Err(Error::param(
+            "supersampling",
+            s.supersampling,
+            format!("an integer >= 1 with resolution x supersampling <= {MAX_IMAGE_SIDE}"),
+        ));
+    }
+    if !(s.bistatic_angle >= 0.0 && s.bistatic_angle < 0.5 * std::f64::consts::PI) {
+        return Err(Error::param(
+            "bistatic_angle",
+            s.bistatic_angle,
+            "radians in [0, pi/2)",
+        ));
+    }
+    if let Some(p) = s.polarization {
+        if !p.iter().all(|x| x.is_finite()) || p[0] <= 0.0 {
+            return Err(Error::param(
+                "polarization",
+                format!("{p:?}"),
+                "a finite Stokes vector with S0 > 0",
+            ));
+        }
+        let dop = (p[1] * p[1] + p[2] * p[2] + p[3] * p[3]).sqrt();
+        if dop > p[0] * (1.0 + 1e-9) {
+            return Err(Error::param(
+                "polarization",
+                format!("{p:?}"),
+                "a physical Stokes vector (sqrt(S1^2 + S2^2 + S3^2) <= S0)",
+            ));
+        }
+    }
+    if !(s.sigma_range > 0.0 && s.sigma_range.is_finite()) {
+        return Err(Error::param(
+            "pulse_fwhm",
+            s.sigma_range,
+            "a positive, finite pulse width",
+        ));
+    }
+    if !(s.bin_width > 0.0 && s.bin_width.is_finite()) {
+        return Err(Error::param(
+            "bin_width",
+            s.bin_width,
+            "a positive, finite length (m)",
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn validate(name: &str, src: &str) -> naga::Module {
+        let module = naga::front::wgsl::parse_str(src)
+            .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        module
+    }
+
+    /// Every shader parses and validates with naga (no optional capabilities needed).
+    #[test]
+    fn shaders_validate_with_naga() {
+        validate("visibility.wgsl", shaders::VISIBILITY);
+        validate("pulse.wgsl", shaders::PULSE);
+        let m = validate("shade (pulse + shade)", &shaders::shade_module());
+        // the uniform block's size matches the Rust struct
+        let params = m
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some("Params"))
+            .expect("Params struct");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(m.to_ctx()).unwrap();
+        assert_eq!(
+            layouter[params.0].size as usize,
+            std::mem::size_of::<gpu::ShadeParams>()
+        );
+    }
+}

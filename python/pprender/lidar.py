@@ -1,0 +1,394 @@
+"""Lidar rendering: Mueller/Stokes images, range maps and range-resolved pulse profiles.
+
+Conventions (written once in ``src/render/mod.rs``; summary):
+
+* Units: metres, seconds, radians; cross-sections in m^2.
+* Telescope frame ``(X, Y, Z)``: ``Z`` from the target toward the receiver, ``X`` right,
+  ``Y`` up in the images. Receiver direction ``wo = Z``; transmitter direction
+  ``wi = (sin beta, 0, cos beta)`` for the bistatic angle ``beta``.
+* Attitudes rotate the body into the telescope frame, ``p_tel = R p_body``: (N, 3, 3)
+  rotation matrices or (N, 4) unit quaternions ``(w, x, y, z)`` (scalar first). The body
+  origin is the range reference.
+* Images: (N, H, W, ...) with row 0 at the top (``+Y``) and column 0 at the left
+  (``-X``); they span ``[-extent, extent]`` in X and Y, ``extent`` the radius of the
+  mesh's bounding sphere about the body origin.
+* Range ``r = -p . (wi + wo) / 2`` relative to the body origin, positive away from the
+  sensor; time axis ``t = 2 r / c``.
+* Stokes bases: received beam ``(X, Y)``; transmitted beam (propagating along ``-wi``)
+  ``x = normalize(-wi x Y)`` (``X`` monostatic), ``y = -wi x x`` (``-Y`` monostatic). A
+  mirror facing the sensor is ``R diag(1, 1, -1, -1)``.
+* Pixel values are differential lidar cross-sections ``4 pi f cos(theta_i) delta^2`` (m^2).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from . import _core
+from ._core import Error, Material
+
+# Mesa's device-select layer complains when XDG_RUNTIME_DIR is unset (headless machines);
+# it is not needed for compute. Must be set before the Vulkan loader starts.
+os.environ.setdefault("NODEVICE_SELECT", "1")
+
+SPEED_OF_LIGHT = 299_792_458.0
+_FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))
+
+__all__ = ["Lidar", "RenderResult", "Scene", "device_info", "render", "SPEED_OF_LIGHT"]
+
+
+def device_info(device: str = "auto") -> dict[str, Any]:
+    """Which adapter renders: name, backend, device type, driver and the limits used.
+
+    ``device``: ``"auto"`` (a GPU when present, else the CPU implementation lavapipe),
+    ``"cpu"`` (lavapipe even when a GPU is present) or ``"gpu"`` (error without one).
+    """
+    return dict(_core.device_info(device))
+
+
+def _resolve_material(m: Any, wavelength: float) -> Material:
+    if isinstance(m, Material):
+        return m
+    if isinstance(m, str):
+        from . import materials
+
+        return materials.get(m, wavelength=wavelength)
+    raise Error(f"invalid material {m!r}: expected a pprender.Material or a material name")
+
+
+class Scene:
+    """A mesh with its materials, ready to render.
+
+    ``mesh``: a ``trimesh.Trimesh`` (or ``trimesh.Scene``, flattened with its transforms),
+    or a ``(vertices, faces)`` pair of arrays (metres, body frame). ``materials``: one
+    material for the whole mesh, a list indexed by ``face_material``, or a mapping from
+    part name to material for meshes from :mod:`pprender.models` (their
+    ``metadata["pprender_parts"]``). Materials may be :class:`pprender.Material` objects
+    or names from :mod:`pprender.materials` (built at ``wavelength``, m). ``face_material``: (F,) indices into the
+    material list (default: the model's part indices, or 0). ``smooth=True`` interpolates
+    vertex normals (from the mesh, or ``normals``) for shading; the default shades flat
+    faces, which is right for boxes and panels.
+    """
+
+    def __init__(
+        self,
+        mesh: Any,
+        materials: Material | str | Sequence[Material | str] | Mapping[str, Material | str],
+        *,
+        face_material: Any = None,
+        smooth: bool = False,
+        normals: Any = None,
+        wavelength: float = 1064e-9,
+    ) -> None:
+        vertices, faces, meta, vnormals = _mesh_arrays(mesh)
+        parts = meta.get("pprender_parts") if meta else None
+        if isinstance(materials, Mapping):
+            if parts is None:
+                raise Error(
+                    "invalid materials: a mapping needs a mesh with metadata['pprender_parts'] "
+                    "(pprender.models); pass a list and face_material instead"
+                )
+            missing = [p for p in parts if p not in materials]
+            if missing:
+                raise Error(
+                    f"invalid materials: no material for part(s) {missing}; "
+                    f"the mesh has parts {list(parts)}"
+                )
+            extra = [k for k in materials if k not in parts]
+            if extra:
+                raise Error(f"invalid materials: unknown part(s) {extra}; parts are {list(parts)}")
+            mat_list = [_resolve_material(materials[p], wavelength) for p in parts]
+            fm = meta.get("pprender_material")
+        elif isinstance(materials, (Material, str)):
+            mat_list = [_resolve_material(materials, wavelength)]
+            fm = None
+        else:
+            mat_list = [_resolve_material(m, wavelength) for m in materials]
+            fm = meta.get("pprender_material") if (meta and face_material is None) else None
+        if face_material is not None:
+            fm = face_material
+        if fm is None:
+            fm = np.zeros(len(faces), dtype=np.int64)
+        fm = np.asarray(fm)
+        if fm.shape != (len(faces),):
+            raise Error(f"invalid face_material: shape {fm.shape}, expected ({len(faces)},)")
+        if not np.issubdtype(fm.dtype, np.integer):
+            raise Error(f"invalid face_material: dtype {fm.dtype}, expected integers")
+        vn = None
+        if normals is not None:
+            vn = np.asarray(normals, dtype=np.float64)
+        elif smooth:
+            if vnormals is None:
+                raise Error("smooth=True needs vertex normals: pass normals= or a trimesh mesh")
+            vn = vnormals
+        self.materials: list[Material] = mat_list
+        self.parts: list[str] | None = list(parts) if parts is not None else None
+        self._core = _core.RenderScene(
+            np.ascontiguousarray(vertices, dtype=np.float64),
+            np.ascontiguousarray(faces, dtype=np.int64),
+            np.ascontiguousarray(fm, dtype=np.int64),
+            mat_list,
+            None if vn is None else np.ascontiguousarray(vn, dtype=np.float64),
+        )
+
+    @property
+    def radius(self) -> float:
+        """Bounding-sphere radius about the body origin (m): the image half-width."""
+        return float(self._core.radius)
+
+    @property
+    def n_faces(self) -> int:
+        return int(self._core.n_faces)
+
+    def prepare(self, bistatic_angle: float = 0.0) -> float:
+        """Build the materials' BRDF tables for a bistatic angle now (they are otherwise
+        built on the first render and cached); returns the build time in seconds."""
+        return float(self._core.prepare(float(bistatic_angle)))
+
+
+def _mesh_arrays(mesh: Any) -> tuple[np.ndarray, np.ndarray, dict[str, Any], np.ndarray | None]:
+    import trimesh
+
+    if isinstance(mesh, trimesh.Scene):
+        mesh = mesh.to_geometry()
+    if isinstance(mesh, trimesh.Trimesh):
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        f = np.asarray(mesh.faces, dtype=np.int64)
+        vn = np.asarray(mesh.vertex_normals, dtype=np.float64) if len(f) else None
+        return v, f, dict(mesh.metadata or {}), vn
+    if isinstance(mesh, (tuple, list)) and len(mesh) == 2:
+        v = np.asarray(mesh[0], dtype=np.float64)
+        f = np.asarray(mesh[1])
+        if v.ndim != 2 or v.shape[1:] != (3,):
+            raise Error(f"invalid vertices: shape {v.shape}, expected (V, 3)")
+        if f.ndim != 2 or f.shape[1:] != (3,) or not np.issubdtype(f.dtype, np.integer):
+            raise Error(f"invalid faces: shape {f.shape} dtype {f.dtype}, expected (F, 3) integers")
+        return v, f.astype(np.int64), {}, None
+    raise Error(
+        f"invalid mesh of type {type(mesh).__name__}: expected a trimesh.Trimesh, "
+        "trimesh.Scene or a (vertices, faces) pair"
+    )
+
+
+@dataclass(frozen=True)
+class Lidar:
+    """The laser and receiver.
+
+    ``pulse_fwhm`` (s): Gaussian pulse full width at half maximum (the received pulse; a
+    range FWHM of ``c pulse_fwhm / 2``). ``bin_width`` (m of range): profile bin width,
+    default a quarter of the range FWHM. ``resolution``: image side in pixels, default
+    such that a pixel is a quarter of the range FWHM across (clamped to [64, 1024]): about
+    1e-3 relative error of cross-sections for generic orientations (edges aligned with the
+    pixel grid alias more; docs/render-accuracy.md).
+    ``supersampling``: sub-pixels per pixel side for visibility and the profile.
+    ``bistatic_angle`` (rad) in [0, pi/2). ``polarization``: transmitted Stokes vector
+    (4,) in the transmit basis, or None for full Mueller output. ``wavelength`` (m) must
+    match the materials' wavelength (their refractive indices are for one wavelength).
+    """
+
+    wavelength: float = 1064e-9
+    pulse_fwhm: float = 100e-12
+    bin_width: float | None = None
+    resolution: int | None = None
+    bistatic_angle: float = 0.0
+    polarization: Sequence[float] | None = None
+    supersampling: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("wavelength", "pulse_fwhm"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise Error(f"invalid {name} = {v!r}: a positive, finite number (SI units)")
+        if self.bin_width is not None and not (
+            math.isfinite(self.bin_width) and self.bin_width > 0
+        ):
+            raise Error(f"invalid bin_width = {self.bin_width!r}: a positive length in metres")
+        if self.resolution is not None and (
+            not isinstance(self.resolution, (int, np.integer)) or not 1 <= self.resolution <= 8192
+        ):
+            raise Error(f"invalid resolution = {self.resolution!r}: an integer in [1, 8192]")
+        if not isinstance(self.supersampling, (int, np.integer)) or not 1 <= self.supersampling <= 64:
+            raise Error(f"invalid supersampling = {self.supersampling!r}: an integer in [1, 64]")
+        b = self.bistatic_angle
+        if not (isinstance(b, (int, float)) and 0.0 <= b < math.pi / 2):
+            raise Error(f"invalid bistatic_angle = {b!r}: radians in [0, pi/2)")
+        if self.polarization is not None:
+            p = np.asarray(self.polarization, dtype=np.float64)
+            if p.shape != (4,) or not np.all(np.isfinite(p)) or p[0] <= 0:
+                raise Error(
+                    f"invalid polarization = {self.polarization!r}: a Stokes vector (4,) with S0 > 0"
+                )
+            if np.linalg.norm(p[1:]) > p[0] * (1 + 1e-9):
+                raise Error(
+                    f"invalid polarization = {self.polarization!r}: not physical "
+                    "(sqrt(S1^2 + S2^2 + S3^2) > S0)"
+                )
+
+    @property
+    def range_fwhm(self) -> float:
+        """Range FWHM of the pulse, ``c pulse_fwhm / 2`` (m)."""
+        return SPEED_OF_LIGHT * self.pulse_fwhm / 2.0
+
+    @property
+    def sigma_range(self) -> float:
+        return self.range_fwhm / _FWHM_PER_SIGMA
+
+    def effective_bin_width(self) -> float:
+        return self.bin_width if self.bin_width is not None else self.range_fwhm / 4.0
+
+    def effective_resolution(self, radius: float) -> int:
+        if self.resolution is not None:
+            return int(self.resolution)
+        return int(min(1024, max(64, math.ceil(2.0 * radius / (self.range_fwhm / 4.0)))))
+
+
+@dataclass
+class RenderResult:
+    """What :func:`render` returns; arrays are NumPy, only the requested ones are set.
+
+    ``cross_section``: (N, 4, 4) total Mueller lidar cross-section in m^2, or (N, 4) Stokes
+    when the sensor has a ``polarization``. ``profile``: (N, B, 4, 4) or (N, B, 4), m^2 per
+    bin, summing over bins to ``cross_section``; ``range_axis`` (B,) bin centres (m),
+    ``bin_edges`` (B+1,), ``time_axis`` (B,) round-trip delays ``2 r / c`` (s).
+    ``mueller`` (N, H, W, 4, 4) / ``stokes`` (N, H, W, 4): m^2 per pixel. ``range``
+    (N, H, W) metres, NaN where nothing is seen; ``coverage`` (N, H, W) the covered
+    fraction of each pixel's sub-pixels.
+    """
+
+    cross_section: np.ndarray
+    bin_edges: np.ndarray
+    pixel_size: float
+    extent: float
+    device: str
+    profile: np.ndarray | None = None
+    mueller: np.ndarray | None = None
+    stokes: np.ndarray | None = None
+    range: np.ndarray | None = None
+    coverage: np.ndarray | None = None
+    table_seconds: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def range_axis(self) -> np.ndarray:
+        return 0.5 * (self.bin_edges[1:] + self.bin_edges[:-1])
+
+    @property
+    def time_axis(self) -> np.ndarray:
+        return 2.0 * self.range_axis / SPEED_OF_LIGHT
+
+    @property
+    def mask(self) -> np.ndarray | None:
+        return None if self.coverage is None else self.coverage > 0
+
+
+_OUTPUTS = ("profile", "mueller", "stokes", "range", "cross_section")
+
+
+def _rotations(attitudes: Any) -> np.ndarray:
+    try:
+        a = np.asarray(attitudes, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise Error(f"invalid attitudes: not a float array ({e})") from None
+    if a.ndim == 1 and a.shape == (4,):
+        a = a[None]
+    if a.ndim == 2 and a.shape == (3, 3):
+        a = a[None]
+    if a.ndim == 2 and a.shape[1] == 4:
+        return np.asarray(_core.quaternions_to_rotations(np.ascontiguousarray(a)))
+    if a.ndim == 3 and a.shape[1:] == (3, 3):
+        if not np.all(np.isfinite(a)):
+            raise Error("invalid attitudes: non-finite rotation matrix entries")
+        return np.ascontiguousarray(a)
+    raise Error(
+        f"invalid attitudes: shape {a.shape}; expected (N, 4) quaternions (w, x, y, z) or "
+        "(N, 3, 3) rotation matrices"
+    )
+
+
+def render(
+    scene: Scene,
+    sensor: Lidar,
+    attitudes: Any,
+    outputs: Sequence[str] = ("profile", "mueller", "range"),
+    *,
+    device: str = "auto",
+) -> RenderResult:
+    """Render ``scene`` seen by ``sensor`` at every attitude, as one batch.
+
+    ``outputs``: any of ``"profile"``, ``"mueller"`` (needs ``polarization=None``),
+    ``"stokes"`` (needs a ``polarization``), ``"range"`` (range map and coverage);
+    ``cross_section`` is always returned. Only what is requested is computed and read
+    back. Batches are split into chunks that fit the device; results equal single calls.
+    ``device``: ``"auto"``, ``"cpu"`` (lavapipe) or ``"gpu"`` (see :func:`device_info`).
+    """
+    if not isinstance(scene, Scene):
+        raise Error(f"invalid scene of type {type(scene).__name__}: expected pprender.Scene")
+    if not isinstance(sensor, Lidar):
+        raise Error(f"invalid sensor of type {type(sensor).__name__}: expected pprender.Lidar")
+    if isinstance(outputs, str):
+        outputs = (outputs,)
+    bad = [o for o in outputs if o not in _OUTPUTS]
+    if bad:
+        raise Error(f"invalid outputs {bad}: choose from {_OUTPUTS}")
+    if "mueller" in outputs and sensor.polarization is not None:
+        raise Error(
+            'invalid outputs: "mueller" needs Lidar(polarization=None); with a transmitted '
+            'polarization request "stokes"'
+        )
+    if "stokes" in outputs and sensor.polarization is None:
+        raise Error('invalid outputs: "stokes" needs Lidar(polarization=...) (a Stokes vector)')
+    for m in scene.materials:
+        if abs(m.wavelength - sensor.wavelength) > 1e-6 * sensor.wavelength:
+            raise Error(
+                f"invalid wavelength = {sensor.wavelength!r}: the scene's material "
+                f"{m.name or m!r} was built for {m.wavelength!r} m; build the materials at "
+                "the sensor's wavelength"
+            )
+    rot = _rotations(attitudes)
+    if len(rot) == 0:
+        raise Error("invalid attitudes: empty batch (N = 0)")
+    t_tables = scene.prepare(sensor.bistatic_angle)
+    res = sensor.effective_resolution(scene.radius)
+    pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]
+    d = scene._core.render(
+        rot,
+        resolution=res,
+        supersampling=int(sensor.supersampling),
+        bistatic_angle=float(sensor.bistatic_angle),
+        polarization=pol,
+        sigma_range=sensor.sigma_range,
+        bin_width=sensor.effective_bin_width(),
+        image=("mueller" in outputs or "stokes" in outputs),
+        range="range" in outputs,
+        profile="profile" in outputs,
+        device=device,
+    )
+    n = len(rot)
+    mueller_out = pol is None
+    tot = d["total"]
+    r = RenderResult(
+        cross_section=tot.reshape(n, 4, 4) if mueller_out else tot,
+        bin_edges=d["bin_edges"],
+        pixel_size=float(d["pixel_size"]),
+        extent=float(d["extent"]),
+        device=str(d["device"]),
+        table_seconds=t_tables,
+    )
+    if "profile" in d:
+        p = d["profile"]
+        r.profile = p.reshape(n, p.shape[1], 4, 4) if mueller_out else p
+    if "image" in d:
+        img = d["image"]
+        if mueller_out:
+            r.mueller = img.reshape(img.shape[:3] + (4, 4))
+        else:
+            r.stokes = img
+    if "range" in d:
+        r.range = d["range"]
+        r.coverage = d["coverage"]
+    return r

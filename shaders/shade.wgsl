@@ -1,0 +1,391 @@
+// Shading and accumulation: one invocation per pixel of one attitude of a chunk.
+//
+// For the pixel's visible triangle (from the visibility pass) it intersects the pixel-centre
+// ray, takes the (optionally interpolated) normal facing the receiver, looks the material's
+// Mueller BRDF up in its table (sp frame, see src/brdf/table.rs), rotates it to the
+// telescope bases and scales it to the differential lidar cross-section
+// dsigma = 4 pi f cos(theta_i) delta^2 (m^2; delta^2 the pixel's projected area). Then,
+// each behind an override constant, it writes the image channels and the range, adds the
+// pixel to the range-resolved profile with its sub-pixel range extent and the pulse
+// (pulse.wgsl, concatenated before this file), and adds the workgroup's sum to the total.
+// Profile and total are accumulated in 64-bit fixed point (two u32 words, integer atomics:
+// exact and order-independent, so results do not depend on scheduling).
+// Conventions: src/render/mod.rs. CPU twin: render::twin::shade_pixel.
+
+override CHANNELS: u32 = 16u;      // 16: Mueller, 4: Stokes (M s_tx), 1: intensity (M s_tx)_0
+override WRITE_IMAGE: bool = true;
+override WRITE_RANGE: bool = true;
+override WRITE_PROFILE: bool = true;
+override WRITE_TOTAL: bool = true;
+
+const PI: f32 = 3.14159265358979;
+const MAX_PARTS: u32 = 3u;
+const HEADER_WORDS: u32 = 12u;
+const LN_FLOOR_F32: f32 = -87.0;
+
+struct Params {
+    width: u32,
+    height: u32,
+    n_bins: u32,
+    n_tri: u32,
+    ext: f32,          // half-width of the image square (m)
+    pix: f32,          // pixel side delta (m)
+    r_min: f32,        // first bin edge (m)
+    bin_width: f32,    // m
+    wi: vec4<f32>,     // toward the transmitter (telescope frame)
+    wo: vec4<f32>,     // toward the receiver (= +z)
+    s_tx: vec4<f32>,   // transmitted Stokes vector (CHANNELS < 16)
+    sigma: f32,        // pulse standard deviation in range units (m)
+    support: f32,      // pulse half support in range units (m)
+    fix_scale: f32,    // fixed-point units per m^2
+    has_normals: u32,
+    beta: f32,         // bistatic angle (rad)
+    max_extent: f32,   // cap on the sub-pixel range widths (m)
+    _pad0: f32,
+    _pad1: f32,
+}
+
+@group(0) @binding(0) var tri_ids: texture_2d_array<u32>;
+@group(0) @binding(1) var<storage, read> geometry: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> rotations: array<mat3x3<f32>>;
+@group(0) @binding(3) var<storage, read> tables: array<f32>;
+@group(0) @binding(4) var<uniform> params: Params;
+@group(0) @binding(5) var<storage, read_write> image: array<f32>;
+@group(0) @binding(6) var<storage, read_write> range_img: array<f32>;
+@group(0) @binding(7) var<storage, read_write> profile: array<atomic<u32>>;
+@group(0) @binding(8) var<storage, read_write> total: array<atomic<u32>>;
+
+var<workgroup> wg_sum: array<f32, 1024>;
+
+// ---- table lookup (port of src/brdf/table.rs) ----
+
+fn catmull_rom(p0: f32, p1: f32, p2: f32, p3: f32, t: f32) -> f32 {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    return 0.5 * ((2.0 * p1) + (-p0 + p2) * t + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
+        + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3);
+}
+
+fn tval(base: u32, row: u32, node: u32, n_z: u32, e: u32) -> f32 {
+    return tables[base + (row * (n_z + 1u) + node) * 16u + e];
+}
+
+// Sign of element e under the mirror relation M(-psi) = D M(psi) D, D = diag(1, 1, -1, -1).
+fn mirror_sign(e: u32) -> f32 {
+    let di = select(1.0, -1.0, (e / 4u) >= 2u);
+    let dj = select(1.0, -1.0, (e % 4u) >= 2u);
+    return di * dj;
+}
+
+// Catmull-Rom in z along one psi row, element e (ghost nodes by quadratic extrapolation).
+fn interp_z(base: u32, row: u32, n_z: u32, i: u32, t: f32, e: u32) -> f32 {
+    let p1 = tval(base, row, i, n_z, e);
+    let p2 = tval(base, row, i + 1u, n_z, e);
+    var p0: f32;
+    if (i > 0u) {
+        p0 = tval(base, row, i - 1u, n_z, e);
+    } else {
+        p0 = 3.0 * p1 - 3.0 * p2 + tval(base, row, min(i + 2u, n_z), n_z, e);
+    }
+    var p3: f32;
+    if (i + 2u <= n_z) {
+        p3 = tval(base, row, i + 2u, n_z, e);
+    } else {
+        p3 = 3.0 * p2 - 3.0 * p1 + tval(base, row, max(i, 1u) - 1u, n_z, e);
+    }
+    var v = catmull_rom(p0, p1, p2, p3, t);
+    if (e == 0u) {
+        v = clamp(v, min(p1, p2), max(p1, p2));
+    }
+    return v;
+}
+
+// psi row index with mirror ghosts: returns (row, sign flag) for virtual row k in [-1, n+1].
+fn psi_row(k: i32, n_psi: u32) -> vec2<u32> {
+    if (k < 0) {
+        return vec2<u32>(u32(-k), 1u);
+    }
+    if (k > i32(n_psi)) {
+        return vec2<u32>(u32(2 * i32(n_psi) - k), 1u);
+    }
+    return vec2<u32>(u32(k), 0u);
+}
+
+// Adds part `p` of material `m` at (z, psi) to acc (Mueller, row-major).
+fn add_part(m: u32, p: u32, z: f32, psi: f32, acc: ptr<function, array<f32, 16>>) {
+    let h = m * HEADER_WORDS + p * 4u;
+    let base = bitcast<u32>(tables[h]);
+    let n_z = bitcast<u32>(tables[h + 1u]);
+    let n_psi = bitcast<u32>(tables[h + 2u]);
+    if (n_z == 0u) {
+        return;
+    }
+    let x = clamp(z, 0.0, 1.0) * f32(n_z);
+    let i = min(u32(x), n_z - 1u);
+    let t = x - f32(i);
+    var vals: array<f32, 16>;
+    if (n_psi == 0u) {
+        for (var e = 0u; e < 16u; e++) {
+            vals[e] = interp_z(base, 0u, n_z, i, t, e);
+        }
+    } else {
+        let y = clamp(psi / PI, 0.0, 1.0) * f32(n_psi);
+        let j = min(u32(y), n_psi - 1u);
+        let s = y - f32(j);
+        for (var e = 0u; e < 16u; e++) {
+            var q: array<f32, 4>;
+            for (var k = 0; k < 4; k++) {
+                let rs = psi_row(i32(j) - 1 + k, n_psi);
+                var v = interp_z(base, rs.x, n_z, i, t, e);
+                if (rs.y == 1u && e != 0u) {
+                    v = v * mirror_sign(e);
+                }
+                q[k] = v;
+            }
+            var v = catmull_rom(q[0], q[1], q[2], q[3], s);
+            if (e == 0u) {
+                v = clamp(v, min(q[1], q[2]), max(q[1], q[2]));
+            }
+            vals[e] = v;
+        }
+    }
+    let m00 = exp(max(vals[0], LN_FLOOR_F32));
+    (*acc)[0] += m00;
+    for (var e = 1u; e < 16u; e++) {
+        (*acc)[e] += m00 * clamp(vals[e], -1.0, 1.0);
+    }
+}
+
+// ---- geometry helpers ----
+
+fn safe_normalize(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
+    let l2 = dot(v, v);
+    if (l2 < 1e-30) {
+        return fallback;
+    }
+    return v * inverseSqrt(l2);
+}
+
+// Any unit vector normal to `k`.
+fn any_perp(k: vec3<f32>) -> vec3<f32> {
+    if (abs(k.x) < 0.9) {
+        return normalize(cross(k, vec3<f32>(1.0, 0.0, 0.0)));
+    }
+    return normalize(cross(k, vec3<f32>(0.0, 1.0, 0.0)));
+}
+
+// Stokes rotation L with (cos b, sin b): rows of the 4x4 as applied to index pairs (1, 2).
+// Returns (cos 2b, sin 2b).
+fn double_angle(c: f32, s: f32) -> vec2<f32> {
+    return vec2<f32>(c * c - s * s, 2.0 * s * c);
+}
+
+fn fixed_add(buf_index: u32, v: f32, is_total: bool) {
+    if (v == 0.0) {
+        return;
+    }
+    let hi = floor(v * 2.3283064365386963e-10); // v / 2^32
+    let lo = v - hi * 4294967296.0;
+    let lo_u = u32(lo);
+    let hi_u = bitcast<u32>(i32(hi));
+    if (is_total) {
+        let old = atomicAdd(&total[2u * buf_index], lo_u);
+        let carry = select(0u, 1u, old + lo_u < old);
+        atomicAdd(&total[2u * buf_index + 1u], hi_u + carry);
+    } else {
+        let old = atomicAdd(&profile[2u * buf_index], lo_u);
+        let carry = select(0u, 1u, old + lo_u < old);
+        atomicAdd(&profile[2u * buf_index + 1u], hi_u + carry);
+    }
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
+           @builtin(local_invocation_index) lidx: u32) {
+    let col = gid.x;
+    let row = gid.y;
+    let layer = gid.z;
+    let inside = col < params.width && row < params.height;
+    var out: array<f32, 16>;
+    var r0 = 0.0;
+    var wa = 0.0;
+    var wb = 0.0;
+    var covered = false;
+    if (inside) {
+        let tri1 = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
+        if (tri1 > 0u && tri1 <= params.n_tri) {
+            let tri = tri1 - 1u;
+            let rot = rotations[layer];
+            let q0 = geometry[3u * tri];
+            let p0 = rot * q0.xyz;
+            let p1 = rot * geometry[3u * tri + 1u].xyz;
+            let p2 = rot * geometry[3u * tri + 2u].xyz;
+            let mat = bitcast<u32>(q0.w);
+            let px = -params.ext + (f32(col) + 0.5) * params.pix;
+            let py = params.ext - (f32(row) + 0.5) * params.pix;
+            // barycentrics of (px, py) in the projected triangle
+            let e1 = p1.xy - p0.xy;
+            let e2 = p2.xy - p0.xy;
+            let d = vec2<f32>(px, py) - p0.xy;
+            let den = e1.x * e2.y - e1.y * e2.x;
+            var ng = cross(p1 - p0, p2 - p0);
+            if (abs(den) > 0.0 && dot(ng, ng) > 0.0) {
+                covered = true;
+                let l1 = (d.x * e2.y - d.y * e2.x) / den;
+                let l2 = (e1.x * d.y - e1.y * d.x) / den;
+                let l0 = 1.0 - l1 - l2;
+                let pz = p0.z + l1 * (p1.z - p0.z) + l2 * (p2.z - p0.z);
+                let p = vec3<f32>(px, py, pz);
+                let wi = params.wi.xyz;
+                let wo = params.wo.xyz;
+                let sum_dir = wi + wo;
+                r0 = -0.5 * dot(p, sum_dir);
+                ng = normalize(ng);
+                if (ng.z < 0.0) {
+                    ng = -ng;
+                }
+                // range gradient across the pixel (plane z = z0 - (nx x + ny y) / nz)
+                let nz = max(ng.z, 1e-12);
+                let dzdx = -ng.x / nz;
+                let dzdy = -ng.y / nz;
+                wa = min(abs(0.5 * (sum_dir.x + sum_dir.z * dzdx)) * params.pix, params.max_extent);
+                wb = min(abs(0.5 * (sum_dir.y + sum_dir.z * dzdy)) * params.pix, params.max_extent);
+                var n = ng;
+                if (params.has_normals != 0u) {
+                    let base = 3u * params.n_tri + 3u * tri;
+                    let ns = l0 * geometry[base].xyz + l1 * geometry[base + 1u].xyz
+                        + l2 * geometry[base + 2u].xyz;
+                    n = safe_normalize(rot * ns, ng);
+                    if (dot(n, ng) < 0.0) {
+                        n = -n;
+                    }
+                }
+                let cos_i = dot(n, wi);
+                let cos_o = dot(n, wo);
+                if (cos_i > 0.0 && cos_o > 0.0) {
+                    // table coordinates (src/brdf/table.rs, bisector frame): b = bisector,
+                    // e_phi = normalize(n x b), e_theta = e_phi x b,
+                    // psi = atan2((wi - wo).e_phi, (wi - wo).e_theta), mirrored when < 0
+                    let b = safe_normalize(sum_dir, n);
+                    let cos_t = clamp(dot(n, b), 0.0, 1.0);
+                    let nxb = cross(n, b);
+                    let sin_t = length(nxb);
+                    var e_phi: vec3<f32>;
+                    if (sin_t > 1e-7) {
+                        e_phi = nxb / sin_t;
+                    } else {
+                        e_phi = any_perp(n);
+                    }
+                    var psi = 0.0;
+                    var mirrored = false;
+                    if (params.beta > 0.0) {
+                        let e_theta = cross(e_phi, b);
+                        let tv = wi - wo;
+                        psi = atan2(dot(tv, e_phi), dot(tv, e_theta));
+                        if (psi < 0.0) {
+                            psi = -psi;
+                            mirrored = true;
+                        }
+                    }
+                    // z of the table grid: cot theta = s z / (1 - z)  =>  z = cos / (s sin + cos)
+                    var m: array<f32, 16>;
+                    for (var part = 0u; part < MAX_PARTS; part++) {
+                        let scale = tables[mat * HEADER_WORDS + part * 4u + 3u];
+                        let z = cos_t / max(scale * sin_t + cos_t, 1e-30);
+                        add_part(mat, part, z, psi, &m);
+                    }
+                    if (mirrored) {
+                        for (var e = 1u; e < 16u; e++) {
+                            m[e] *= mirror_sign(e);
+                        }
+                    }
+                    // the table's beam bases: x = normalize(e_phi - (e_phi.w) w), y = k x x
+                    let k_in = -wi;
+                    let x_in = safe_normalize(e_phi - dot(e_phi, wi) * wi, any_perp(wi));
+                    let x_out = safe_normalize(e_phi - dot(e_phi, wo) * wo, any_perp(wo));
+                    let y_in = cross(k_in, x_in);
+                    let y_out = cross(wo, x_out);
+                    // telescope bases: x_in_t = normalize(k_in x Y), x_out_t = X (wo = Z)
+                    let x_in_t = normalize(cross(k_in, vec3<f32>(0.0, 1.0, 0.0)));
+                    let y_in_t = cross(k_in, x_in_t);
+                    let x_out_t = vec3<f32>(1.0, 0.0, 0.0);
+                    // S_sp_in = L(b_in) S_t_in: cos b_in = x_in.x_in_t, sin b_in = x_in.y_in_t
+                    let ai = double_angle(dot(x_in, x_in_t), dot(x_in, y_in_t));
+                    // S_t_out = L(b_out) S_sp_out: cos = x_out_t.x_out, sin = x_out_t.y_out
+                    let ao = double_angle(dot(x_out_t, x_out), dot(x_out_t, y_out));
+                    // M_t = L(ao) M L(ai), L(c, s) = [[1,0,0,0],[0,c,s,0],[0,-s,c,0],[0,0,0,1]]
+                    var tmp: array<f32, 16>;
+                    for (var i = 0u; i < 4u; i++) {
+                        let a1 = m[i * 4u + 1u];
+                        let a2 = m[i * 4u + 2u];
+                        tmp[i * 4u] = m[i * 4u];
+                        tmp[i * 4u + 1u] = a1 * ai.x - a2 * ai.y;
+                        tmp[i * 4u + 2u] = a1 * ai.y + a2 * ai.x;
+                        tmp[i * 4u + 3u] = m[i * 4u + 3u];
+                    }
+                    let k = 4.0 * PI * cos_i * params.pix * params.pix;
+                    for (var j = 0u; j < 4u; j++) {
+                        let b1 = tmp[4u + j];
+                        let b2 = tmp[8u + j];
+                        out[j] = k * tmp[j];
+                        out[4u + j] = k * (ao.x * b1 + ao.y * b2);
+                        out[8u + j] = k * (-ao.y * b1 + ao.x * b2);
+                        out[12u + j] = k * tmp[12u + j];
+                    }
+                    if (CHANNELS < 16u) {
+                        let s = params.s_tx;
+                        var st: array<f32, 16>;
+                        for (var i = 0u; i < 4u; i++) {
+                            st[i] = out[i * 4u] * s.x + out[i * 4u + 1u] * s.y
+                                + out[i * 4u + 2u] * s.z + out[i * 4u + 3u] * s.w;
+                        }
+                        out = st;
+                    }
+                }
+            }
+        }
+        let pix_index = (layer * params.height + row) * params.width + col;
+        if (WRITE_IMAGE) {
+            for (var c = 0u; c < CHANNELS; c++) {
+                image[pix_index * CHANNELS + c] = out[c];
+            }
+        }
+        if (WRITE_RANGE) {
+            range_img[pix_index] = select(bitcast<f32>(0x7fc00000u), r0, covered);
+        }
+        if (WRITE_PROFILE && covered && out[0] != 0.0) {
+            let half_w = 0.5 * (wa + wb) + params.support;
+            let lo = (r0 - half_w - params.r_min) / params.bin_width;
+            let hi = (r0 + half_w - params.r_min) / params.bin_width;
+            let k0 = u32(clamp(floor(lo), 0.0, f32(params.n_bins - 1u)));
+            let k1 = u32(clamp(floor(hi), 0.0, f32(params.n_bins - 1u)));
+            var c_prev = pulse_cdf_gauss_box2(params.r_min + f32(k0) * params.bin_width - r0,
+                                              params.sigma, wa, wb);
+            for (var kb = k0; kb <= k1; kb++) {
+                let c_next = pulse_cdf_gauss_box2(params.r_min + f32(kb + 1u) * params.bin_width - r0,
+                                                  params.sigma, wa, wb);
+                let w = (c_next - c_prev) * params.fix_scale;
+                c_prev = c_next;
+                if (w != 0.0) {
+                    let base = (layer * params.n_bins + kb) * CHANNELS;
+                    for (var c = 0u; c < CHANNELS; c++) {
+                        fixed_add(base + c, w * out[c], false);
+                    }
+                }
+            }
+        }
+    }
+    if (WRITE_TOTAL) {
+        for (var c = 0u; c < CHANNELS; c++) {
+            wg_sum[lidx * 16u + c] = out[c];
+        }
+        workgroupBarrier();
+        if (lidx < CHANNELS) {
+            var s = 0.0;
+            for (var t = 0u; t < 64u; t++) {
+                s += wg_sum[t * 16u + lidx];
+            }
+            fixed_add(layer * CHANNELS + lidx, s * params.fix_scale, true);
+        }
+    }
+}

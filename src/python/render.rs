@@ -1,0 +1,267 @@
+//! Bindings for `crate::render`: a scene object holding the mesh, materials and their GPU
+//! tables, batched rendering, device information.
+
+use super::brdf::PyMaterial;
+use crate::brdf::Material;
+use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
+use crate::render::gpu::{self, DeviceChoice, Outputs, SensorSetup};
+use crate::render::tables::SceneTables;
+use numpy::ndarray::{Array1, Array2, Array3, Array4};
+use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::Arc;
+
+/// Mesh + materials + per-bistatic-angle table cache (Python: `pprender.Scene` wraps it).
+#[pyclass(module = "pprender._core", name = "RenderScene", frozen)]
+pub struct PyRenderScene {
+    mesh: Arc<Mesh>,
+    tables: SceneTables,
+}
+
+fn rows3(a: &PyReadonlyArray2<'_, f64>, name: &'static str) -> crate::Result<Vec<[f64; 3]>> {
+    let v = a.as_array();
+    if v.ncols() != 3 {
+        return Err(crate::Error::Shape(format!(
+            "{name} must have shape (n, 3), got {:?}",
+            v.shape()
+        )));
+    }
+    Ok(v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+#[pymethods]
+impl PyRenderScene {
+    #[new]
+    #[pyo3(signature = (vertices, faces, face_material, materials, normals=None))]
+    fn new(
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f64>,
+        faces: PyReadonlyArray2<'_, i64>,
+        face_material: PyReadonlyArray1<'_, i64>,
+        materials: Vec<Py<PyMaterial>>,
+        normals: Option<PyReadonlyArray2<'_, f64>>,
+    ) -> PyResult<Self> {
+        if materials.is_empty() {
+            return Err(crate::Error::param("materials", "[]", "at least one Material").into());
+        }
+        let verts = rows3(&vertices, "vertices")?;
+        let fv = faces.as_array();
+        if fv.ncols() != 3 {
+            return Err(crate::Error::Shape(format!(
+                "faces must have shape (n, 3), got {:?}",
+                fv.shape()
+            ))
+            .into());
+        }
+        let mut fs = Vec::with_capacity(fv.nrows());
+        for (i, r) in fv.rows().into_iter().enumerate() {
+            let mut f = [0u32; 3];
+            for k in 0..3 {
+                if r[k] < 0 || r[k] > u32::MAX as i64 {
+                    return Err(crate::Error::param(
+                        "faces",
+                        format!("{:?} at index {i}", r.to_vec()),
+                        format!("vertex indices in [0, {})", verts.len()),
+                    )
+                    .into());
+                }
+                f[k] = r[k] as u32;
+            }
+            fs.push(f);
+        }
+        let fm: Vec<u32> = face_material
+            .as_array()
+            .iter()
+            .enumerate()
+            .map(|(i, &m)| {
+                if m < 0 || m > u32::MAX as i64 {
+                    Err(crate::Error::param(
+                        "face_material",
+                        format!("{m} at face {i}"),
+                        format!("indices in [0, {})", materials.len()),
+                    ))
+                } else {
+                    Ok(m as u32)
+                }
+            })
+            .collect::<crate::Result<_>>()?;
+        let ns = normals.map(|n| rows3(&n, "normals")).transpose()?;
+        let mats: Vec<Arc<Material>> = materials.iter().map(|m| m.get().inner.clone()).collect();
+        let n_mat = mats.len();
+        let mesh = py.detach(|| Mesh::new(verts, fs, ns, fm, n_mat))?;
+        Ok(PyRenderScene {
+            mesh: Arc::new(mesh),
+            tables: SceneTables::new(mats),
+        })
+    }
+
+    /// Radius of the bounding sphere about the body origin (m).
+    #[getter]
+    fn radius(&self) -> f64 {
+        self.mesh.radius
+    }
+
+    #[getter]
+    fn n_faces(&self) -> usize {
+        self.mesh.faces.len()
+    }
+
+    /// Build (or fetch from the cache) the GPU tables for a bistatic angle; returns the
+    /// build time in seconds (0 when cached).
+    fn prepare(&self, py: Python<'_>, bistatic_angle: f64) -> PyResult<f64> {
+        let t = std::time::Instant::now();
+        let (_, built) = py.detach(|| self.tables.get(bistatic_angle))?;
+        Ok(if built {
+            t.elapsed().as_secs_f64()
+        } else {
+            0.0
+        })
+    }
+
+    /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
+    #[pyo3(signature = (rotations, *, resolution, supersampling, bistatic_angle, polarization,
+        sigma_range, bin_width, image, range, profile, device))]
+    #[allow(clippy::too_many_arguments)]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        rotations: PyReadonlyArray3<'py, f64>,
+        resolution: usize,
+        supersampling: usize,
+        bistatic_angle: f64,
+        polarization: Option<[f64; 4]>,
+        sigma_range: f64,
+        bin_width: f64,
+        image: bool,
+        range: bool,
+        profile: bool,
+        device: &str,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let rv = rotations.as_array();
+        if rv.shape()[1] != 3 || rv.shape()[2] != 3 {
+            return Err(crate::Error::Shape(format!(
+                "rotations must have shape (n, 3, 3), got {:?}",
+                rv.shape()
+            ))
+            .into());
+        }
+        let rots: Vec<Rot> = rv
+            .outer_iter()
+            .map(|m| {
+                [
+                    [m[[0, 0]], m[[0, 1]], m[[0, 2]]],
+                    [m[[1, 0]], m[[1, 1]], m[[1, 2]]],
+                    [m[[2, 0]], m[[2, 1]], m[[2, 2]]],
+                ]
+            })
+            .collect();
+        check_rotations(&rots)?;
+        let choice = DeviceChoice::parse(device)?;
+        let sensor = SensorSetup {
+            resolution,
+            supersampling,
+            bistatic_angle,
+            polarization,
+            sigma_range,
+            bin_width,
+        };
+        crate::render::check_sensor(&sensor)?;
+        let outputs = Outputs {
+            image,
+            range,
+            profile,
+        };
+        let mesh = self.mesh.clone();
+        let r = py.detach(|| -> crate::Result<_> {
+            let (tables, _) = self.tables.get(bistatic_angle)?;
+            let g = gpu::context(choice)?;
+            let r = gpu::render(&g, &mesh, &tables, &sensor, &rots, outputs)?;
+            Ok((r, g.info.name.clone()))
+        })?;
+        let (r, dev_name) = r;
+        let d = PyDict::new(py);
+        let (n, h, w, c) = (r.n, r.height, r.width, r.channels);
+        let tot = Array2::from_shape_vec((n, c), r.total).expect("shape");
+        d.set_item("total", tot.into_pyarray(py))?;
+        if let Some(img) = r.image {
+            let a = Array4::from_shape_vec((n, h, w, c), img).expect("shape");
+            d.set_item("image", a.into_pyarray(py))?;
+        }
+        if let Some(rg) = r.range {
+            let a = Array3::from_shape_vec((n, h, w), rg).expect("shape");
+            d.set_item("range", a.into_pyarray(py))?;
+        }
+        if let Some(cv) = r.coverage {
+            let a = Array3::from_shape_vec((n, h, w), cv).expect("shape");
+            d.set_item("coverage", a.into_pyarray(py))?;
+        }
+        if let Some(p) = r.profile {
+            let a = Array3::from_shape_vec((n, r.n_bins, c), p).expect("shape");
+            d.set_item("profile", a.into_pyarray(py))?;
+        }
+        let edges: Vec<f64> = (0..=r.n_bins)
+            .map(|k| r.r_min + k as f64 * r.bin_width)
+            .collect();
+        d.set_item("bin_edges", Array1::from(edges).into_pyarray(py))?;
+        d.set_item("pixel_size", r.pixel_size)?;
+        d.set_item("extent", r.extent)?;
+        d.set_item("device", dev_name)?;
+        Ok(d)
+    }
+}
+
+/// Rotation matrices (n, 3, 3) from (n, 4) quaternions `(w, x, y, z)`.
+#[pyfunction]
+fn quaternions_to_rotations<'py>(
+    py: Python<'py>,
+    q: PyReadonlyArray2<'py, f64>,
+) -> PyResult<Bound<'py, numpy::PyArray3<f64>>> {
+    let v = q.as_array();
+    if v.ncols() != 4 {
+        return Err(crate::Error::Shape(format!(
+            "attitudes as quaternions must have shape (n, 4), got {:?}",
+            v.shape()
+        ))
+        .into());
+    }
+    let qs: Vec<[f64; 4]> = v
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2], r[3]])
+        .collect();
+    let r = rotations_from_quaternions(&qs)?;
+    let flat: Vec<f64> = r.iter().flat_map(|m| m.iter().flatten().copied()).collect();
+    Ok(Array3::from_shape_vec((r.len(), 3, 3), flat)
+        .expect("shape")
+        .into_pyarray(py))
+}
+
+/// Which adapter renders for `device` (creating the device on first use).
+#[pyfunction]
+#[pyo3(signature = (device="auto"))]
+fn device_info<'py>(py: Python<'py>, device: &str) -> PyResult<Bound<'py, PyDict>> {
+    let choice = DeviceChoice::parse(device)?;
+    let g = py.detach(|| gpu::context(choice))?;
+    let i = &g.info;
+    let d = PyDict::new(py);
+    d.set_item("name", &i.name)?;
+    d.set_item("backend", &i.backend)?;
+    d.set_item("device_type", &i.device_type)?;
+    d.set_item("driver", &i.driver)?;
+    d.set_item("driver_info", &i.driver_info)?;
+    d.set_item(
+        "max_storage_buffer_binding_size",
+        i.max_storage_buffer_binding_size,
+    )?;
+    d.set_item("max_texture_array_layers", i.max_texture_array_layers)?;
+    d.set_item("max_texture_dimension_2d", i.max_texture_dimension_2d)?;
+    Ok(d)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyRenderScene>()?;
+    m.add_function(wrap_pyfunction!(quaternions_to_rotations, m)?)?;
+    m.add_function(wrap_pyfunction!(device_info, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,266 @@
+//! Meshes and attitudes for the renderer (conventions in [`crate::render`]).
+
+use crate::error::{Error, Result};
+
+/// A triangle mesh in the body frame with a material index per face.
+#[derive(Debug, Clone)]
+pub struct Mesh {
+    pub vertices: Vec<[f64; 3]>,
+    pub faces: Vec<[u32; 3]>,
+    /// Optional per-vertex normals (interpolated for shading; the geometric normal decides
+    /// which side faces the receiver).
+    pub normals: Option<Vec<[f64; 3]>>,
+    pub face_material: Vec<u32>,
+    /// Radius of the bounding sphere about the body origin.
+    pub radius: f64,
+}
+
+/// Relative area (to the squared bounding radius) below which a triangle is degenerate.
+pub const MIN_RELATIVE_AREA: f64 = 1e-14;
+
+impl Mesh {
+    /// Validate and build. `n_materials`: the number of materials the indices refer to.
+    pub fn new(
+        vertices: Vec<[f64; 3]>,
+        faces: Vec<[u32; 3]>,
+        normals: Option<Vec<[f64; 3]>>,
+        face_material: Vec<u32>,
+        n_materials: usize,
+    ) -> Result<Self> {
+        if vertices.is_empty() || faces.is_empty() {
+            return Err(Error::Shape(format!(
+                "mesh is empty ({} vertices, {} faces): need at least one triangle",
+                vertices.len(),
+                faces.len()
+            )));
+        }
+        if let Some(i) = vertices
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            return Err(Error::param(
+                "vertices",
+                format!("{:?} at index {i}", vertices[i]),
+                "finite coordinates",
+            ));
+        }
+        let nv = vertices.len() as u32;
+        if let Some(i) = faces.iter().position(|f| f.iter().any(|&k| k >= nv)) {
+            return Err(Error::param(
+                "faces",
+                format!("{:?} at index {i}", faces[i]),
+                format!("vertex indices in [0, {})", nv),
+            ));
+        }
+        if face_material.len() != faces.len() {
+            return Err(Error::Shape(format!(
+                "face_material has {} entries for {} faces",
+                face_material.len(),
+                faces.len()
+            )));
+        }
+        if let Some(i) = face_material
+            .iter()
+            .position(|&m| m as usize >= n_materials)
+        {
+            return Err(Error::param(
+                "face_material",
+                format!("{} at face {i}", face_material[i]),
+                format!("indices in [0, {n_materials}) (one per material)"),
+            ));
+        }
+        if let Some(n) = &normals {
+            if n.len() != vertices.len() {
+                return Err(Error::Shape(format!(
+                    "normals has {} entries for {} vertices",
+                    n.len(),
+                    vertices.len()
+                )));
+            }
+            if let Some(i) = n.iter().position(|v| {
+                let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                !l.is_finite() || l < 1e-12
+            }) {
+                return Err(Error::param(
+                    "normals",
+                    format!("{:?} at index {i}", n[i]),
+                    "finite, non-zero vectors",
+                ));
+            }
+        }
+        let radius = vertices
+            .iter()
+            .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+            .fold(0.0f64, f64::max);
+        if radius <= 0.0 {
+            return Err(Error::param(
+                "vertices",
+                "all at the origin",
+                "a mesh of non-zero size",
+            ));
+        }
+        let r2 = radius * radius;
+        for (i, f) in faces.iter().enumerate() {
+            let [a, b, c] = f.map(|k| vertices[k as usize]);
+            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+            let n = crate::optics::frames::cross(e1, e2);
+            let area2 = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            if !(area2 > 2.0 * MIN_RELATIVE_AREA * r2) {
+                return Err(Error::param(
+                    "faces",
+                    format!("{f:?} at index {i} (area {:.3e} m^2)", 0.5 * area2),
+                    format!(
+                        "non-degenerate triangles (area > {MIN_RELATIVE_AREA:e} x radius^2); \
+                         remove zero-area faces, e.g. trimesh's update_faces(nondegenerate_faces())"
+                    ),
+                ));
+            }
+        }
+        Ok(Mesh {
+            vertices,
+            faces,
+            normals,
+            face_material,
+            radius,
+        })
+    }
+
+    /// The de-indexed GPU geometry: `3 T` corners `(x, y, z, bits(material))`, then, with
+    /// normals, `3 T` corner normals `(nx, ny, nz, 0)`.
+    pub fn gpu_geometry(&self) -> Vec<[f32; 4]> {
+        let t = self.faces.len();
+        let mut out = Vec::with_capacity(if self.normals.is_some() { 6 * t } else { 3 * t });
+        for (f, &m) in self.faces.iter().zip(&self.face_material) {
+            for &k in f {
+                let v = self.vertices[k as usize];
+                out.push([v[0] as f32, v[1] as f32, v[2] as f32, f32::from_bits(m)]);
+            }
+        }
+        if let Some(ns) = &self.normals {
+            for f in &self.faces {
+                for &k in f {
+                    let n = ns[k as usize];
+                    let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                    out.push([(n[0] / l) as f32, (n[1] / l) as f32, (n[2] / l) as f32, 0.0]);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A rotation matrix (row-major, `p_tel = R p_body`).
+pub type Rot = [[f64; 3]; 3];
+
+/// Rotation matrices from `(w, x, y, z)` quaternions (normalized; refused when the norm is
+/// off by more than `1e-6` relative or not finite).
+pub fn rotations_from_quaternions(q: &[[f64; 4]]) -> Result<Vec<Rot>> {
+    q.iter()
+        .enumerate()
+        .map(|(i, q)| {
+            let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+            if !n.is_finite() || (n - 1.0).abs() > 1e-6 {
+                return Err(Error::param(
+                    "attitudes",
+                    format!("quaternion {i} = {q:?} (norm {n})"),
+                    "unit quaternions (w, x, y, z), |q| = 1 within 1e-6",
+                ));
+            }
+            let [w, x, y, z] = q.map(|c| c / n);
+            Ok([
+                [
+                    1.0 - 2.0 * (y * y + z * z),
+                    2.0 * (x * y - w * z),
+                    2.0 * (x * z + w * y),
+                ],
+                [
+                    2.0 * (x * y + w * z),
+                    1.0 - 2.0 * (x * x + z * z),
+                    2.0 * (y * z - w * x),
+                ],
+                [
+                    2.0 * (x * z - w * y),
+                    2.0 * (y * z + w * x),
+                    1.0 - 2.0 * (x * x + y * y),
+                ],
+            ])
+        })
+        .collect()
+}
+
+/// Check rotation matrices: finite, orthonormal within `1e-6`, determinant +1.
+pub fn check_rotations(r: &[Rot]) -> Result<()> {
+    for (i, m) in r.iter().enumerate() {
+        let mut worst = 0.0f64;
+        for a in 0..3 {
+            for b in 0..3 {
+                let d: f64 = (0..3).map(|k| m[k][a] * m[k][b]).sum();
+                let want = if a == b { 1.0 } else { 0.0 };
+                worst = worst.max((d - want).abs());
+            }
+        }
+        let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        if !(worst <= 1e-6) || !(det > 0.0) {
+            return Err(Error::param(
+                "attitudes",
+                format!("rotation matrix {i} (|R^T R - I| = {worst:.2e}, det = {det:.6})"),
+                "proper rotation matrices (orthonormal within 1e-6, det +1)",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `R v`.
+#[inline]
+pub fn rotate(r: &Rot, v: [f64; 3]) -> [f64; 3] {
+    [
+        r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2],
+        r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2],
+        r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2],
+    ]
+}
+
+/// GPU layout of a rotation: WGSL `mat3x3<f32>` (3 columns padded to vec4).
+pub fn gpu_rotation(r: &Rot) -> [f32; 12] {
+    let mut out = [0.0f32; 12];
+    for col in 0..3 {
+        for row in 0..3 {
+            out[4 * col + row] = r[row][col] as f32;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quaternion_rotation_is_orthonormal_and_matches_axis_angle() {
+        // 90 degrees about z: x -> y
+        let h = (0.5f64).sqrt();
+        let r = rotations_from_quaternions(&[[h, 0.0, 0.0, h]]).unwrap();
+        let v = rotate(&r[0], [1.0, 0.0, 0.0]);
+        assert!((v[0]).abs() < 1e-15 && (v[1] - 1.0).abs() < 1e-15);
+        check_rotations(&r).unwrap();
+        assert!(rotations_from_quaternions(&[[1.0, 0.1, 0.0, 0.0]]).is_err());
+        assert!(rotations_from_quaternions(&[[f64::NAN, 0.0, 0.0, 0.0]]).is_err());
+    }
+
+    #[test]
+    fn mesh_validation() {
+        let v = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        assert!(Mesh::new(v.clone(), vec![[0, 1, 2]], None, vec![0], 1).is_ok());
+        assert!(Mesh::new(v.clone(), vec![[0, 1, 3]], None, vec![0], 1).is_err());
+        assert!(Mesh::new(v.clone(), vec![[0, 1, 1]], None, vec![0], 1).is_err());
+        assert!(Mesh::new(v.clone(), vec![[0, 1, 2]], None, vec![1], 1).is_err());
+        assert!(Mesh::new(vec![], vec![], None, vec![], 1).is_err());
+        let mut bad = v.clone();
+        bad[1][0] = f64::NAN;
+        assert!(Mesh::new(bad, vec![[0, 1, 2]], None, vec![0], 1).is_err());
+    }
+}

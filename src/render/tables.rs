@@ -1,0 +1,77 @@
+//! Per-scene material tables for the GPU: each material's [`BrdfTable`] for the sensor's
+//! bistatic angle, packed with [`GpuTables::pack`], built once per angle and cached.
+
+use super::gpu::{GpuTables, PartRef};
+use crate::brdf::table::{BrdfTable, BrdfTableOptions, TableFrame};
+use crate::brdf::Material;
+use crate::error::Result;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// The materials of a scene and their packed tables by bistatic angle.
+pub struct SceneTables {
+    pub materials: Vec<Arc<Material>>,
+    cache: Mutex<HashMap<u64, (Arc<GpuTables>, Arc<Vec<BrdfTable>>)>>,
+}
+
+impl SceneTables {
+    pub fn new(materials: Vec<Arc<Material>>) -> Self {
+        SceneTables {
+            materials,
+            cache: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// The packed tables for `beta` (built on first use); `true` if built by this call.
+    pub fn get(&self, beta: f64) -> Result<(Arc<GpuTables>, bool)> {
+        let (g, _, built) = self.get_with_tables(beta)?;
+        Ok((g, built))
+    }
+
+    /// As [`SceneTables::get`], with the f64 tables (for the CPU twin).
+    pub fn get_with_tables(
+        &self,
+        beta: f64,
+    ) -> Result<(Arc<GpuTables>, Arc<Vec<BrdfTable>>, bool)> {
+        let key = beta.to_bits();
+        if let Some((g, t)) = self
+            .cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+        {
+            return Ok((g.clone(), t.clone(), false));
+        }
+        let opts = BrdfTableOptions {
+            frame: Some(TableFrame::Bisector),
+            ..Default::default()
+        };
+        let tables: Vec<BrdfTable> = self
+            .materials
+            .par_iter()
+            .map(|m| BrdfTable::build(m, beta, &opts))
+            .collect::<Result<_>>()?;
+        let refs: Vec<Vec<PartRef<'_>>> = tables
+            .iter()
+            .map(|t| {
+                t.parts
+                    .iter()
+                    .map(|p| PartRef {
+                        scale: p.scale,
+                        n_z: p.n_z,
+                        n_psi: p.n_psi,
+                        data: &p.data,
+                    })
+                    .collect()
+            })
+            .collect();
+        let g = Arc::new(GpuTables::pack(&refs)?);
+        let t = Arc::new(tables);
+        self.cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, (g.clone(), t.clone()));
+        Ok((g, t, true))
+    }
+}

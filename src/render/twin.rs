@@ -1,0 +1,294 @@
+//! CPU twins of the kernels, in f64: `visibility` (of `shaders/visibility.wgsl`) by
+//! rasterizing pixel centres exactly, `shade_pixel` and `render_cpu` (of
+//! `shaders/shade.wgsl`) with any BRDF: the material's tables (what the GPU uses) or the
+//! exact core evaluation. The Stokes bases here come from [`crate::optics::frames`]'s
+//! `beam_bases` in a local frame (the kernel builds them from cross products), so the
+//! comparison also checks the frame handling. Conventions: [`crate::render`].
+
+use super::geometry::{rotate, Mesh, Rot};
+use super::gpu::{Layout, Outputs, Rendered, SensorSetup};
+use super::pulse;
+use crate::optics::frames::{beam_bases, cross, dot, normalize, Frame, V3};
+use crate::optics::mueller::Mat4;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// Triangle index + 1 seen at each pixel centre (0: empty), row-major `width x width`.
+/// Ties (a centre on a shared edge) may resolve differently from the GPU's rasterizer.
+pub fn visibility(mesh: &Mesh, rot: &Rot, width: usize, ext: f64) -> Vec<u32> {
+    let pix = 2.0 * ext / width as f64;
+    let mut ids = vec![0u32; width * width];
+    let mut depth = vec![f64::NEG_INFINITY; width * width];
+    for (t, f) in mesh.faces.iter().enumerate() {
+        let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
+        let den =
+            (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
+        if den == 0.0 {
+            continue;
+        }
+        let (xmin, xmax) = (
+            p.iter().map(|v| v[0]).fold(f64::INFINITY, f64::min),
+            p.iter().map(|v| v[0]).fold(f64::NEG_INFINITY, f64::max),
+        );
+        let (ymin, ymax) = (
+            p.iter().map(|v| v[1]).fold(f64::INFINITY, f64::min),
+            p.iter().map(|v| v[1]).fold(f64::NEG_INFINITY, f64::max),
+        );
+        let j0 = (((xmin + ext) / pix - 0.5).ceil().max(0.0)) as usize;
+        let j1 = (((xmax + ext) / pix - 0.5).floor().min(width as f64 - 1.0)) as isize;
+        let i0 = (((ext - ymax) / pix - 0.5).ceil().max(0.0)) as usize;
+        let i1 = (((ext - ymin) / pix - 0.5).floor().min(width as f64 - 1.0)) as isize;
+        if j1 < 0 || i1 < 0 {
+            continue;
+        }
+        for i in i0..=(i1 as usize) {
+            let y = ext - (i as f64 + 0.5) * pix;
+            for j in j0..=(j1 as usize) {
+                let x = -ext + (j as f64 + 0.5) * pix;
+                let (dx, dy) = (x - p[0][0], y - p[0][1]);
+                let l1 = (dx * (p[2][1] - p[0][1]) - dy * (p[2][0] - p[0][0])) / den;
+                let l2 = ((p[1][0] - p[0][0]) * dy - (p[1][1] - p[0][1]) * dx) / den;
+                let l0 = 1.0 - l1 - l2;
+                if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                    continue;
+                }
+                let z = l0 * p[0][2] + l1 * p[1][2] + l2 * p[2][2];
+                let k = i * width + j;
+                if z > depth[k] {
+                    depth[k] = z;
+                    ids[k] = t as u32 + 1;
+                }
+            }
+        }
+    }
+    ids
+}
+
+/// A pixel's shading result.
+#[derive(Debug, Clone, Copy)]
+pub struct PixelSample {
+    /// Differential cross-section, Mueller in the telescope bases (m^2).
+    pub mueller: Mat4,
+    pub range: f64,
+    /// Sub-pixel range widths `(a, b)` (m).
+    pub widths: (f64, f64),
+}
+
+/// `brdf(material, wi_local, wo_local)`: the Mueller BRDF in the `Sp` frame, local `n = z`.
+pub type BrdfFn<'a> = dyn Fn(usize, V3, V3) -> Mat4 + Sync + 'a;
+
+/// Shade pixel `(row, col)` whose centre sees triangle `tri` (f64 twin of `shade.wgsl`).
+#[allow(clippy::too_many_arguments)]
+pub fn shade_pixel(
+    mesh: &Mesh,
+    rot: &Rot,
+    tri: usize,
+    row: usize,
+    col: usize,
+    lay: &Layout,
+    beta: f64,
+    brdf: &BrdfFn<'_>,
+) -> Option<PixelSample> {
+    let f = mesh.faces[tri];
+    let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
+    let x = -lay.ext + (col as f64 + 0.5) * lay.pix;
+    let y = lay.ext - (row as f64 + 0.5) * lay.pix;
+    let den = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
+    if den == 0.0 {
+        return None;
+    }
+    let (dx, dy) = (x - p[0][0], y - p[0][1]);
+    let l1 = (dx * (p[2][1] - p[0][1]) - dy * (p[2][0] - p[0][0])) / den;
+    let l2 = ((p[1][0] - p[0][0]) * dy - (p[1][1] - p[0][1]) * dx) / den;
+    let l0 = 1.0 - l1 - l2;
+    let z = l0 * p[0][2] + l1 * p[1][2] + l2 * p[2][2];
+    let wi = [beta.sin(), 0.0, beta.cos()];
+    let wo = [0.0, 0.0, 1.0];
+    let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+    let range = -0.5 * dot([x, y, z], s);
+    let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
+    let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+    let mut ng = normalize(cross(e1, e2));
+    if ng[2] < 0.0 {
+        ng = [-ng[0], -ng[1], -ng[2]];
+    }
+    let nz = ng[2].max(1e-12);
+    let (dzdx, dzdy) = (-ng[0] / nz, -ng[1] / nz);
+    let a = (0.5 * (s[0] + s[2] * dzdx)).abs() * lay.pix;
+    let b = (0.5 * (s[1] + s[2] * dzdy)).abs() * lay.pix;
+    let widths = (a.min(lay.max_extent), b.min(lay.max_extent));
+    let mut n = ng;
+    if let Some(ns) = &mesh.normals {
+        let c = f.map(|k| ns[k as usize]);
+        let v = [0, 1, 2].map(|d| l0 * c[0][d] + l1 * c[1][d] + l2 * c[2][d]);
+        let v = rotate(rot, v);
+        let l = dot(v, v).sqrt();
+        if l > 1e-15 {
+            n = [v[0] / l, v[1] / l, v[2] / l];
+            if dot(n, ng) < 0.0 {
+                n = [-n[0], -n[1], -n[2]];
+            }
+        }
+    }
+    let (ci, co) = (dot(n, wi), dot(n, wo));
+    let zero = PixelSample {
+        mueller: [[0.0; 4]; 4],
+        range,
+        widths,
+    };
+    if ci <= 0.0 || co <= 0.0 {
+        return Some(zero);
+    }
+    // local frame (t1, t2, n)
+    let helper = if n[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
+    let t1 = normalize(cross(helper, n));
+    let t2 = cross(n, t1);
+    let to_local = |v: V3| [dot(v, t1), dot(v, t2), dot(v, n)];
+    let to_world = |v: V3| {
+        [
+            v[0] * t1[0] + v[1] * t2[0] + v[2] * n[0],
+            v[0] * t1[1] + v[1] * t2[1] + v[2] * n[1],
+            v[0] * t1[2] + v[1] * t2[2] + v[2] * n[2],
+        ]
+    };
+    let (wil, wol) = (to_local(wi), to_local(wo));
+    let mat = mesh.face_material[tri] as usize;
+    let m_sp = brdf(mat, wil, wol);
+    let (xi, yi, xo, yo) = beam_bases(Frame::Sp, wil, wol);
+    let (xi, yi, xo, yo) = (to_world(xi), to_world(yi), to_world(xo), to_world(yo));
+    // telescope bases
+    let k_in = [-wi[0], -wi[1], -wi[2]];
+    let xit = normalize(cross(k_in, [0.0, 1.0, 0.0]));
+    let yit = cross(k_in, xit);
+    let (xot, yot) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+    // M_t = J_out M_sp J_in with Mueller forms of the basis changes (as change_frame)
+    let jm = |a: [[f64; 2]; 2]| {
+        let c = |x: f64| crate::optics::fresnel::C64::new(x, 0.0);
+        crate::optics::mueller::jones_to_mueller(&[
+            [c(a[0][0]), c(a[0][1])],
+            [c(a[1][0]), c(a[1][1])],
+        ])
+    };
+    let min = jm([[dot(xi, xit), dot(xi, yit)], [dot(yi, xit), dot(yi, yit)]]);
+    let mout = jm([[dot(xot, xo), dot(xot, yo)], [dot(yot, xo), dot(yot, yo)]]);
+    let mt = crate::optics::mueller::matmul(&mout, &crate::optics::mueller::matmul(&m_sp, &min));
+    let k = 4.0 * PI * ci * lay.pix * lay.pix;
+    let mut out = [[0.0; 4]; 4];
+    for r in 0..4 {
+        for c in 0..4 {
+            out[r][c] = k * mt[r][c];
+        }
+    }
+    Some(PixelSample {
+        mueller: out,
+        range,
+        widths,
+    })
+}
+
+/// The whole renderer on the CPU in f64 (twin of `gpu::render`, without supersampling
+/// of the image outputs: `sensor.supersampling` must be 1).
+pub fn render_cpu(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &BrdfFn<'_>,
+) -> Rendered {
+    let lay = Layout::new(mesh, sensor);
+    let w = lay.width;
+    let ch = if sensor.polarization.is_some() { 4 } else { 16 };
+    let nb = lay.n_bins;
+    let edges: Vec<f64> = (0..=nb)
+        .map(|k| lay.r_min + k as f64 * sensor.bin_width)
+        .collect();
+    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>)> = rotations
+        .par_iter()
+        .map(|rot| {
+            let ids = visibility(mesh, rot, w, lay.ext);
+            let mut img = vec![0.0f32; w * w * ch];
+            let mut rng = vec![f32::NAN; w * w];
+            let mut prof = vec![0.0f64; nb * ch];
+            let mut tot = vec![0.0f64; ch];
+            let mut weights = vec![0.0f64; nb];
+            for (k, &id) in ids.iter().enumerate() {
+                if id == 0 {
+                    continue;
+                }
+                let (row, col) = (k / w, k % w);
+                let Some(s) = shade_pixel(
+                    mesh,
+                    rot,
+                    id as usize - 1,
+                    row,
+                    col,
+                    &lay,
+                    sensor.bistatic_angle,
+                    brdf,
+                ) else {
+                    continue;
+                };
+                rng[k] = s.range as f32;
+                let vals: Vec<f64> = match sensor.polarization {
+                    None => (0..16).map(|e| s.mueller[e / 4][e % 4]).collect(),
+                    Some(st) => (0..4)
+                        .map(|i| (0..4).map(|j| s.mueller[i][j] * st[j]).sum())
+                        .collect(),
+                };
+                for c in 0..ch {
+                    img[k * ch + c] = vals[c] as f32;
+                    tot[c] += vals[c];
+                }
+                if outputs.profile && vals[0] != 0.0 {
+                    pulse::bin_weights_f64(
+                        s.range,
+                        s.widths.0,
+                        s.widths.1,
+                        sensor.sigma_range,
+                        &edges,
+                        &mut weights,
+                    );
+                    for (b, &wt) in weights.iter().enumerate() {
+                        if wt != 0.0 {
+                            for c in 0..ch {
+                                prof[b * ch + c] += wt * vals[c];
+                            }
+                        }
+                    }
+                }
+            }
+            (img, rng, prof, tot)
+        })
+        .collect();
+    let n = rotations.len();
+    let cov: Vec<f32> = per
+        .iter()
+        .flat_map(|p| p.1.iter().map(|x| if x.is_nan() { 0.0 } else { 1.0 }))
+        .collect();
+    Rendered {
+        n,
+        height: w,
+        width: w,
+        channels: ch,
+        image: outputs
+            .image
+            .then(|| per.iter().flat_map(|p| p.0.clone()).collect()),
+        range: outputs
+            .range
+            .then(|| per.iter().flat_map(|p| p.1.clone()).collect()),
+        coverage: outputs.range.then_some(cov),
+        profile: outputs
+            .profile
+            .then(|| per.iter().flat_map(|p| p.2.clone()).collect()),
+        total: per.iter().flat_map(|p| p.3.clone()).collect(),
+        r_min: lay.r_min,
+        bin_width: sensor.bin_width,
+        n_bins: nb,
+        pixel_size: lay.pix,
+        extent: lay.ext,
+    }
+}
