@@ -37,7 +37,7 @@ struct Params {
     s_tx: vec4<f32>,   // transmitted Stokes vector (CHANNELS < 16)
     sigma: f32,        // pulse standard deviation in range units (m)
     support: f32,      // pulse half support in range units (m)
-    fix_scale: f32,    // fixed-point units per m^2
+    fix_scale: f32,    // fixed-point units per m^2 (a pixel's |value| is clamped to 2^61 / (fix_scale n_pix))
     has_normals: u32,
     beta: f32,         // bistatic angle (rad)
     max_extent: f32,   // cap on the sub-pixel range widths (m)
@@ -180,14 +180,23 @@ fn double_angle(c: f32, s: f32) -> vec2<f32> {
     return vec2<f32>(c * c - s * s, 2.0 * s * c);
 }
 
+// Adds `v` (already in fixed-point units, |v| < 2^62) to the 64-bit two's-complement
+// accumulator at `buf_index` (low word first). The magnitude is split in f32, where both
+// parts are exact and in range (float-to-int conversion of out-of-range values is not
+// portable), and negated in integer arithmetic.
 fn fixed_add(buf_index: u32, v: f32, is_total: bool) {
     if (v == 0.0) {
         return;
     }
-    let hi = floor(v * 2.3283064365386963e-10); // v / 2^32
-    let lo = v - hi * 4294967296.0;
-    let lo_u = u32(lo);
-    let hi_u = bitcast<u32>(i32(hi));
+    let a = abs(v);
+    let hi_f = floor(a * 2.3283064365386963e-10); // a / 2^32
+    let lo_f = a - hi_f * 4294967296.0;           // exact, in [0, 2^32 - 256]
+    var lo_u = u32(lo_f);
+    var hi_u = u32(hi_f);
+    if (v < 0.0) {
+        lo_u = ~lo_u + 1u;
+        hi_u = ~hi_u + select(0u, 1u, lo_u == 0u);
+    }
     if (is_total) {
         let old = atomicAdd(&total[2u * buf_index], lo_u);
         let carry = select(0u, 1u, old + lo_u < old);
@@ -207,6 +216,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
     let layer = gid.z;
     let inside = col < params.width && row < params.height;
     var out: array<f32, 16>;
+    var acc_out: array<f32, 16>; // out, clamped for the fixed-point sums
     var r0 = 0.0;
     var wa = 0.0;
     var wb = 0.0;
@@ -353,6 +363,11 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
         if (WRITE_RANGE) {
             range_img[pix_index] = select(bitcast<f32>(0x7fc00000u), r0, covered);
         }
+        // bound every channel (|M_ij| <= M00) for the fixed-point sums
+        let cap = 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
+        for (var c = 0u; c < CHANNELS; c++) {
+            acc_out[c] = clamp(out[c], -cap, cap);
+        }
         if (WRITE_PROFILE && covered && out[0] != 0.0) {
             let half_w = 0.5 * (wa + wb) + params.support;
             let lo = (r0 - half_w - params.r_min) / params.bin_width;
@@ -369,7 +384,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                 if (w != 0.0) {
                     let base = (layer * params.n_bins + kb) * CHANNELS;
                     for (var c = 0u; c < CHANNELS; c++) {
-                        fixed_add(base + c, w * out[c], false);
+                        fixed_add(base + c, w * acc_out[c], false);
                     }
                 }
             }
@@ -377,7 +392,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
     }
     if (WRITE_TOTAL) {
         for (var c = 0u; c < CHANNELS; c++) {
-            wg_sum[lidx * 16u + c] = out[c];
+            wg_sum[lidx * 16u + c] = acc_out[c];
         }
         workgroupBarrier();
         if (lidx < CHANNELS) {

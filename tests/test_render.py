@@ -301,3 +301,25 @@ def test_bad_input_gives_clear_errors():
         pprender.render(scene, pprender.Lidar(wavelength=532e-9), IDENTITY)
     with pytest.raises(pprender.Error, match="device"):
         pprender.render(scene, pprender.Lidar(), IDENTITY, device="tpu")
+
+
+def test_profile_total_and_image_agree_for_mixed_materials():
+    # regression: negative Mueller elements and a GGX paint (whose M00 diverges at grazing)
+    # once corrupted the fixed-point sums; the image (f32, summed here) is independent of them
+    from pprender import materials
+
+    mesh = models.cubesat("3U", detail=3)
+    mats = {
+        "bus": materials.get("aluminium", alpha=0.15),
+        "solar_cells": materials.get("fused_silica", alpha=0.05),
+        "panel_back": materials.get("white_paint"),
+        "antenna": materials.get("gold", alpha=0.3),
+    }
+    scene = pprender.Scene(mesh, mats)
+    q = np.array([[1.0, 0, 0, 0], [0.9, 0.3, 0.2, 0.1], [0.5, -0.5, 0.5, 0.5]])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    res = pprender.render(scene, pprender.Lidar(resolution=96), q, outputs=("profile", "mueller"))
+    img = res.mueller.astype(np.float64).sum(axis=(1, 2))
+    scale = res.cross_section[:, 0, 0][:, None, None]
+    np.testing.assert_allclose(res.profile.sum(axis=1), res.cross_section, rtol=0, atol=1e-6 * scale.max())
+    assert np.all(np.abs(img - res.cross_section) <= 2e-6 * scale)

@@ -158,7 +158,7 @@ impl Gpu {
             device_type: format!("{:?}", ainfo.device_type),
             driver: ainfo.driver.clone(),
             driver_info: ainfo.driver_info.clone(),
-            max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size as u64,
+            max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
             max_texture_array_layers: limits.max_texture_array_layers,
             max_texture_dimension_2d: limits.max_texture_dimension_2d,
         };
@@ -363,7 +363,13 @@ struct VisParams {
 #[derive(Debug, Clone)]
 pub struct GpuTables {
     pub data: Vec<f32>,
-    /// Upper bound of the tabulated `M00` over all materials (1/sr).
+    /// Upper bound of `M00 cos(theta_i)` over all materials (1/sr) away from the last
+    /// table cell before grazing: it sets the fixed-point scale, and the kernel clamps
+    /// each pixel's accumulated value to `4 pi delta^2 max_m00`. (`M00` itself diverges at
+    /// grazing for some distributions, e.g. GGX's single term as `1 / cos`, and a cubic
+    /// through that node bounds nothing useful in the last cell; pixels there, within
+    /// `atan(1 / (scale n_z))` of grazing (0.1-0.3 deg at the default grids), are the
+    /// only ones the clamp can touch.)
     pub max_m00: f64,
 }
 
@@ -381,8 +387,8 @@ pub struct PartRef<'a> {
 }
 
 impl GpuTables {
-    /// Pack up to [`MAX_PARTS`] parts per material.
-    pub fn pack(materials: &[Vec<PartRef<'_>>]) -> Result<Self> {
+    /// Pack up to [`MAX_PARTS`] parts per material tabulated for the bistatic angle `beta`.
+    pub fn pack(materials: &[Vec<PartRef<'_>>], beta: f64) -> Result<Self> {
         let mut data = vec![0.0f32; HEADER_WORDS * materials.len()];
         let mut max_m00 = 0.0f64;
         for (m, parts) in materials.iter().enumerate() {
@@ -410,14 +416,28 @@ impl GpuTables {
                 data[h + 1] = f32::from_bits(part.n_z as u32);
                 data[h + 2] = f32::from_bits(part.n_psi as u32);
                 data[h + 3] = part.scale as f32;
-                let mut mx = f64::NEG_INFINITY;
-                for (k, &v) in part.data.iter().enumerate() {
-                    if k % 16 == 0 {
-                        mx = mx.max(v);
+                data.extend(part.data.iter().map(|&v| v as f32));
+                // Interpolated ln M00 lies between its two bracketing z nodes (and rows),
+                // so per cell max(M00) x max(cos theta_i) bounds M00 cos(theta_i) there,
+                // with cos(theta_i) <= cos(max(theta_b - beta/2, 0)) for bisector angle
+                // theta_b.
+                let nz1 = part.n_z + 1;
+                let cos_i = |i: usize| {
+                    let th = crate::microfacet::masking::ZTable::theta_of_z(
+                        part.scale,
+                        i as f64 / part.n_z as f64,
+                    );
+                    (th - 0.5 * beta).max(0.0).cos()
+                };
+                let mut mx = 0.0f64;
+                for row in 0..rows {
+                    for i in 1..part.n_z {
+                        let a = part.data[(row * nz1 + i) * 16];
+                        let b = part.data[(row * nz1 + i + 1) * 16];
+                        mx = mx.max(a.max(b).exp() * cos_i(i).max(cos_i(i + 1)));
                     }
-                    data.push(v as f32);
                 }
-                sum_max += mx.exp();
+                sum_max += mx;
             }
             for p in parts.len()..MAX_PARTS {
                 let h = HEADER_WORDS * m + 4 * p;
@@ -1113,12 +1133,15 @@ pub(crate) mod tests {
         let rho = 0.7;
         let mesh = uv_sphere(a, 64, 128);
         let data = lambert_part(rho, 4);
-        let tables = GpuTables::pack(&[vec![PartRef {
-            scale: 1.0,
-            n_z: 4,
-            n_psi: 0,
-            data: &data,
-        }]])
+        let tables = GpuTables::pack(
+            &[vec![PartRef {
+                scale: 1.0,
+                n_z: 4,
+                n_psi: 0,
+                data: &data,
+            }]],
+            0.0,
+        )
         .unwrap();
         let sensor = lambert_sensor(128);
         let rot = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
@@ -1235,7 +1258,7 @@ mod twin_tests {
                     data: &p.data,
                 })
                 .collect();
-            let tables = GpuTables::pack(&[parts]).unwrap();
+            let tables = GpuTables::pack(&[parts], beta).unwrap();
             let mut sensor = super::tests::lambert_sensor(64);
             sensor.bistatic_angle = beta;
             let out = Outputs {

@@ -66,7 +66,7 @@ impl SceneTables {
                     .collect()
             })
             .collect();
-        let g = Arc::new(GpuTables::pack(&refs)?);
+        let g = Arc::new(GpuTables::pack(&refs, beta)?);
         let t = Arc::new(tables);
         self.cache
             .lock()
