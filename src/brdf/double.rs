@@ -27,7 +27,9 @@
 //! # Quadrature
 //! `h1` through the projected-area CDF of `D` in `w = sqrt(1 - u)` (as the albedo
 //! integrator): `D(h1) d omega = 2 w dw dphi / (2 pi cos(theta_h1))`; Gauss-Legendre in
-//! `w` and the periodic trapezoid rule in `phi`, `order` points each.
+//! `w` between breakpoints (`order` points per segment) and in `phi` on panels between the
+//! integrand's special azimuths (about `order` points in all, graded near grazing; see
+//! [`double_marks`]).
 //!
 //! # Coherent backscatter
 //! A double path and its reverse (through the same facets in the other order, intermediate
@@ -236,15 +238,147 @@ fn push_breaks(v: V3, cos_phi: f64, sin_phi: f64, zs: &[f64], out: &mut Vec<f64>
     }
 }
 
-/// Integrate over facet normals `h` distributed as `D(h) d omega_h`: `phi` by the periodic
-/// trapezoid rule and `theta_h` in `w = sqrt(1 - u)` by Gauss-Legendre on every segment
-/// between the breakpoints `breaks(cos phi, sin phi)`, so that the kinks and cuts of the
-/// integrand fall on segment ends. `f(h, weight)` accumulates; `weight` includes the
-/// measure `D(h) d omega_h`.
+/// A special azimuth of the integrand over `h`: a panel end of the `phi` rule. `grade > 0`:
+/// the integrand varies on the scale `grade` (radians) next to it, and panels of widths
+/// `grade * 4^k` lead up to it from both sides; `soft`: the integrand's `theta`-integral
+/// may behave like `sqrt(|phi - phi*|)` there (a cut of the integrand ending or turning
+/// at this azimuth), and the panels touching it map `phi - phi* = L t^2` so that
+/// Gauss-Legendre in `t` sees an analytic function.
+#[derive(Debug, Clone, Copy)]
+struct Mark {
+    phi: f64,
+    grade: f64,
+    soft: bool,
+}
+
+impl Mark {
+    fn plain(phi: f64) -> Self {
+        Mark {
+            phi,
+            grade: 0.0,
+            soft: false,
+        }
+    }
+}
+
+/// Nodes and weights `(phi, dphi)` over one turn with about `n` nodes: Gauss-Legendre on the
+/// panels between the marks (graded and mapped as each mark asks). The first mark is the
+/// origin of the turn.
+fn phi_rule(n: usize, marks: &[Mark]) -> Vec<(f64, f64)> {
+    let two_pi = 2.0 * PI;
+    let origin = marks[0].phi;
+    let mut ms: Vec<Mark> = marks
+        .iter()
+        .map(|m| Mark {
+            phi: (m.phi - origin).rem_euclid(two_pi),
+            ..*m
+        })
+        .collect();
+    ms.sort_by(|a, b| a.phi.partial_cmp(&b.phi).unwrap());
+    // merge marks closer than 1e-9
+    let mut merged: Vec<Mark> = Vec::with_capacity(ms.len());
+    for m in ms {
+        let m = if two_pi - m.phi < 1e-9 {
+            Mark { phi: 0.0, ..m }
+        } else {
+            m
+        };
+        if let Some(last) = merged
+            .iter_mut()
+            .find(|x: &&mut Mark| (x.phi - m.phi).abs() < 1e-9)
+        {
+            if m.grade > 0.0 && (last.grade == 0.0 || m.grade < last.grade) {
+                last.grade = m.grade;
+            }
+            last.soft |= m.soft;
+        } else {
+            merged.push(m);
+        }
+    }
+    merged.sort_by(|a, b| a.phi.partial_cmp(&b.phi).unwrap());
+    // panels: (a, b, soft at a, soft at b, main)
+    let mut panels: Vec<(f64, f64, bool, bool, bool)> = vec![];
+    let ratio: f64 = 4.0;
+    const MAX_LEVELS: i32 = 6;
+    for (k, m) in merged.iter().enumerate() {
+        let (next, b) = if k + 1 < merged.len() {
+            (merged[k + 1], merged[k + 1].phi)
+        } else {
+            (merged[0], two_pi)
+        };
+        let a = m.phi;
+        let mid = 0.5 * (a + b);
+        // at most MAX_LEVELS graded panels per side (a tiny scale starts further out)
+        let first = |g: f64| g.max(0.5 * (b - a) / ratio.powi(MAX_LEVELS));
+        let mut left = vec![a];
+        if m.grade > 0.0 {
+            let mut w = first(m.grade);
+            while a + w < mid {
+                left.push(a + w);
+                w *= ratio;
+            }
+        }
+        let mut right = vec![b];
+        if next.grade > 0.0 {
+            let mut w = first(next.grade);
+            while b - w > mid {
+                right.push(b - w);
+                w *= ratio;
+            }
+        }
+        right.reverse();
+        let main_index = left.len() - 1;
+        let pts: Vec<f64> = left.into_iter().chain(right).collect();
+        let np = pts.len() - 1;
+        for i in 0..np {
+            panels.push((
+                pts[i],
+                pts[i + 1],
+                i == 0 && m.soft,
+                i + 1 == np && next.soft,
+                i == main_index,
+            ));
+        }
+    }
+    let graded_n = 12;
+    let n_graded = panels.iter().filter(|p| !p.4).count();
+    let main_len: f64 = panels.iter().filter(|p| p.4).map(|p| p.1 - p.0).sum();
+    let n_main = panels.len() - n_graded;
+    // every main panel gets n/8 nodes (its ends may be singular), the rest by length
+    let n_min = (n / 8).max(4);
+    let rest = n.saturating_sub(n_graded * graded_n + n_main * n_min);
+    let mut out = Vec::with_capacity(n + 8);
+    for &(a, b, sa, sb, main) in &panels {
+        let m = if main {
+            n_min + (rest as f64 * (b - a) / main_len).round() as usize
+        } else {
+            graded_n
+        };
+        let rule = crate::quad::gauss_legendre(m);
+        let l = b - a;
+        for (&x, &w) in rule.x.iter().zip(&rule.w) {
+            let (t, dt) = match (sa, sb) {
+                (false, false) => (x, 1.0),
+                (true, false) => (x * x, 2.0 * x),
+                (false, true) => (1.0 - (1.0 - x) * (1.0 - x), 2.0 * (1.0 - x)),
+                (true, true) => (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x)),
+            };
+            out.push((origin + a + l * t, w * l * dt));
+        }
+    }
+    out
+}
+
+/// Integrate over facet normals `h` distributed as `D(h) d omega_h`: `phi` by
+/// Gauss-Legendre on the panels of [`phi_rule`] between the special azimuths `marks`, and
+/// `theta_h` in `w = sqrt(1 - u)` by Gauss-Legendre on every segment between the
+/// breakpoints `breaks(cos phi, sin phi)`, so that the kinks and cuts of the integrand fall
+/// on segment ends. `f(h, weight)` accumulates; `weight` includes the measure
+/// `D(h) d omega_h`.
 fn integrate_h(
     mat: &Material,
     order: usize,
-    phi0: f64,
+    marks: &[Mark],
     breaks: &dyn Fn(f64, f64, &mut Vec<f64>),
     f: &mut dyn FnMut(V3, f64),
 ) {
@@ -252,16 +386,7 @@ fn integrate_h(
     let dist = mat.spec.distribution;
     let rule = crate::quad::gauss_legendre(n_w);
     let mut bps = Vec::with_capacity(16);
-    // phi: Gauss-Legendre on two half turns starting at phi0 (a singular azimuth sits on
-    // the panel ends, where Gauss-Legendre copes with it).
-    let prule = crate::quad::gauss_legendre(n_phi.div_ceil(2));
-    let phis: Vec<(f64, f64)> = (0..2)
-        .flat_map(|half| {
-            let prule = prule.clone();
-            (0..prule.x.len())
-                .map(move |i| (phi0 + PI * (half as f64 + prule.x[i]), PI * prule.w[i]))
-        })
-        .collect();
+    let phis = phi_rule(n_phi, marks);
     for &(phi, dphi) in &phis {
         let (sp, cp) = phi.sin_cos();
         bps.clear();
@@ -296,6 +421,57 @@ fn integrate_h(
             }
         }
     }
+}
+
+/// The special azimuths of the double-bounce integrand over `h1` (see [`Mark`]), found by
+/// profiling the `theta`-integral against `phi` (examples/double_conv.rs):
+/// - `phi0`, the azimuth of the point singularity `d = wo`: the profile has a kink there and
+///   varies on the scale `min(cot theta_i, cot theta_o)` near grazing (graded);
+/// - `phi_i +- 90 deg`, where the cut `wi.h1 = 0` meets the horizon and the reach of `d_z`
+///   is least: the profile varies on the scale `cot theta_i` (graded near grazing);
+/// - the turning points of the cut `d_z = wo_z` (`h2` on the horizon, where GGX's `D(h2)`
+///   jumps): `sqrt`-like profile (soft).
+fn double_marks(wi: V3, wo: V3, phi0: f64) -> Vec<Mark> {
+    let s_i = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+    let s_o = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
+    let (c_i, c_o) = (wi[2], wo[2]);
+    // grading only where the scale is small against the panels
+    let graded = |eps: f64| if eps < 0.25 { eps } else { 0.0 };
+    let eps_io = (c_i / s_i.max(1e-300)).min(c_o / s_o.max(1e-300));
+    let mut marks = vec![
+        Mark {
+            phi: phi0,
+            grade: graded(eps_io),
+            soft: true,
+        },
+        Mark::plain(phi0 + PI),
+    ];
+    if s_i > 1e-12 {
+        let phi_i = wi[1].atan2(wi[0]);
+        let grade = graded(c_i / s_i);
+        for sgn in [-1.0, 1.0] {
+            marks.push(Mark {
+                phi: phi_i + sgn * 0.5 * PI,
+                grade,
+                soft: true,
+            });
+        }
+        // turning points of d_z = wo_z: R = sqrt(s_v^2 + c_i^2) = wo_z (see `push_breaks`)
+        if c_o > c_i {
+            let x = (c_o * c_o - c_i * c_i).sqrt() / s_i;
+            if x < 1.0 {
+                let a = x.acos();
+                for sgn in [-1.0, 1.0] {
+                    marks.push(Mark {
+                        phi: phi_i + sgn * a,
+                        grade: 0.0,
+                        soft: true,
+                    });
+                }
+            }
+        }
+    }
+    marks
 }
 
 /// The double-bounce Mueller BRDF (1/sr, no cosine), with the coherent-backscatter
@@ -361,7 +537,8 @@ pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, c
     } else {
         wi[1].atan2(wi[0])
     };
-    integrate_h(mat, order, phi0, &breaks, &mut body);
+    let marks = double_marks(wi, wo, phi0);
+    integrate_h(mat, order, &marks, &breaks, &mut body);
     let scale = 0.25;
     for row in acc.iter_mut() {
         for x in row.iter_mut() {
@@ -401,7 +578,14 @@ pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -
         };
         total += wgt * vh * p * fr;
     };
-    integrate_h(mat, order, v[1].atan2(v[0]), &breaks, &mut body);
+    let p = v[1].atan2(v[0]);
+    integrate_h(
+        mat,
+        order,
+        &[Mark::plain(p), Mark::plain(p + PI)],
+        &breaks,
+        &mut body,
+    );
     total
 }
 
@@ -437,7 +621,14 @@ pub fn double_albedo(
         };
         total += wgt * wh * w * s_of(neg(d)) * fr;
     };
-    integrate_h(mat, order, wi[1].atan2(wi[0]), &breaks, &mut body);
+    let p = wi[1].atan2(wi[0]);
+    integrate_h(
+        mat,
+        order,
+        &[Mark::plain(p), Mark::plain(p + PI)],
+        &breaks,
+        &mut body,
+    );
     total
 }
 
