@@ -651,18 +651,5 @@ pub fn eval_double_framed(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 
 
 /// Express a Mueller matrix given in the beam frames `from` in the frames `to`.
 pub fn change_frame(m: &Mat4, wi: V3, wo: V3, from: Frame, to: Frame) -> Mat4 {
-    let (xi1, yi1, xo1, yo1) = beam_bases(from, wi, wo);
-    let (xi2, yi2, xo2, yo2) = beam_bases(to, wi, wo);
-    let c = |a: f64| C64::new(a, 0.0);
-    // input: components in basis 2 -> basis 1; output: basis 1 -> basis 2
-    let jin = [
-        [c(dot(xi1, xi2)), c(dot(xi1, yi2))],
-        [c(dot(yi1, xi2)), c(dot(yi1, yi2))],
-    ];
-    let jout = [
-        [c(dot(xo2, xo1)), c(dot(xo2, yo1))],
-        [c(dot(yo2, xo1)), c(dot(yo2, yo1))],
-    ];
-    let (min, mout) = (jones_to_mueller(&jin), jones_to_mueller(&jout));
-    crate::optics::mueller::matmul(&mout, &crate::optics::mueller::matmul(m, &min))
+    crate::optics::frames::change_bases(m, beam_bases(from, wi, wo), beam_bases(to, wi, wo))
 }

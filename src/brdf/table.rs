@@ -120,9 +120,8 @@ fn double_only(mat: &Material, w: [f64; 3]) -> Mat4 {
 // BrdfTable: the total Mueller BRDF for the GPU renderer.
 // ---------------------------------------------------------------------------------------
 
+pub use crate::optics::frames::change_bases;
 use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, V3};
-use crate::optics::fresnel::C64;
-use crate::optics::mueller::{jones_to_mueller, matmul};
 use crate::{Error, Result};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -374,16 +373,7 @@ pub fn default_grid(kind: PartKind, alpha: f64, _beta: f64) -> (usize, usize, f6
     }
 }
 
-/// Catmull-Rom on `[p1, p2]` at `t` in `[0, 1]` (the formula of [`ZTable::eval_z`]).
-#[inline]
-pub fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
-    let t2 = t * t;
-    let t3 = t2 * t;
-    0.5 * ((2.0 * p1)
-        + (-p0 + p2) * t
-        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
-        + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3)
-}
+pub use crate::microfacet::masking::catmull_rom;
 
 /// Interval `i = min(floor(x), n - 1)` (x clamped to `[0, n]`) and the fraction `x - i`.
 #[inline]
@@ -544,23 +534,6 @@ fn table_bases(frame: TableFrame, wi: V3, wo: V3) -> (V3, V3, V3, V3) {
         TableFrame::Sp => beam_bases(Frame::Sp, wi, wo),
         TableFrame::Bisector => bisector_bases(wi, wo),
     }
-}
-
-/// Express `m`, given in the beam bases `from`, in the bases `to`.
-pub fn change_bases(m: &Mat4, from: (V3, V3, V3, V3), to: (V3, V3, V3, V3)) -> Mat4 {
-    let (xi1, yi1, xo1, yo1) = from;
-    let (xi2, yi2, xo2, yo2) = to;
-    let c = |a: f64| C64::new(a, 0.0);
-    let jin = [
-        [c(dot(xi1, xi2)), c(dot(xi1, yi2))],
-        [c(dot(yi1, xi2)), c(dot(yi1, yi2))],
-    ];
-    let jout = [
-        [c(dot(xo2, xo1)), c(dot(xo2, yo1))],
-        [c(dot(yo2, xo1)), c(dot(yo2, yo1))],
-    ];
-    let (min, mout) = (jones_to_mueller(&jin), jones_to_mueller(&jout));
-    matmul(&mout, &matmul(m, &min))
 }
 
 /// `D m D` with `D = diag(1, 1, -1, -1)`.
@@ -860,7 +833,7 @@ impl BrdfTable {
 mod tests {
     use super::*;
     use crate::microfacet::Distribution;
-    use crate::optics::fresnel::Eta;
+    use crate::optics::fresnel::{Eta, C64};
 
     fn material(dist: Distribution, eta: C64, double: bool, order: usize) -> Material {
         let mut spec = super::super::MaterialSpec::new(dist, Eta::Complex(eta));

@@ -305,12 +305,7 @@ impl ZTable {
         } else {
             3.0 * p2 - 3.0 * p1 + v[i.saturating_sub(1)]
         };
-        let t2 = t * t;
-        let t3 = t2 * t;
-        0.5 * ((2.0 * p1)
-            + (-p0 + p2) * t
-            + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
-            + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3)
+        catmull_rom(p0, p1, p2, p3, t)
     }
 
     #[inline]
@@ -327,6 +322,18 @@ impl ZTable {
         let (a, b) = (self.values[i], self.values[i + 1]);
         self.eval_z(z).clamp(a.min(b), a.max(b))
     }
+}
+
+/// Catmull-Rom cubic through `p1` (t = 0) and `p2` (t = 1) with neighbours `p0`, `p3`
+/// (the interpolation of every table in the crate and of `shaders/shade.wgsl`).
+#[inline]
+pub fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    0.5 * ((2.0 * p1)
+        + (-p0 + p2) * t
+        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
+        + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3)
 }
 
 /// Default node count of the per-material masking tables.

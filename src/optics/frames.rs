@@ -107,6 +107,28 @@ pub fn beam_bases(frame: Frame, wi: V3, wo: V3) -> (V3, V3, V3, V3) {
     (x_in, cross(k_in, x_in), x_out, cross(k_out, x_out))
 }
 
+/// Express `m`, given in the beam bases `from`, in the bases `to`.
+pub fn change_bases(
+    m: &crate::optics::mueller::Mat4,
+    from: (V3, V3, V3, V3),
+    to: (V3, V3, V3, V3),
+) -> crate::optics::mueller::Mat4 {
+    let (xi1, yi1, xo1, yo1) = from;
+    let (xi2, yi2, xo2, yo2) = to;
+    let c = |a: f64| crate::optics::fresnel::C64::new(a, 0.0);
+    let jin = [
+        [c(dot(xi1, xi2)), c(dot(xi1, yi2))],
+        [c(dot(yi1, xi2)), c(dot(yi1, yi2))],
+    ];
+    let jout = [
+        [c(dot(xo2, xo1)), c(dot(xo2, yo1))],
+        [c(dot(yo2, xo1)), c(dot(yo2, yo1))],
+    ];
+    use crate::optics::mueller::{jones_to_mueller, matmul};
+    let (min, mout) = (jones_to_mueller(&jin), jones_to_mueller(&jout));
+    matmul(&mout, &matmul(m, &min))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

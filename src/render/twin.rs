@@ -8,7 +8,7 @@
 use super::geometry::{rotate, Mesh, Rot};
 use super::gpu::{Layout, Outputs, Rendered, SensorSetup};
 use super::pulse;
-use crate::optics::frames::{beam_bases, cross, dot, normalize, Frame, V3};
+use crate::optics::frames::{beam_bases, change_bases, cross, dot, normalize, Frame, V3};
 use crate::optics::mueller::Mat4;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -165,17 +165,7 @@ pub fn shade_pixel(
     let xit = normalize(cross(k_in, [0.0, 1.0, 0.0]));
     let yit = cross(k_in, xit);
     let (xot, yot) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
-    // M_t = J_out M_sp J_in with Mueller forms of the basis changes (as change_frame)
-    let jm = |a: [[f64; 2]; 2]| {
-        let c = |x: f64| crate::optics::fresnel::C64::new(x, 0.0);
-        crate::optics::mueller::jones_to_mueller(&[
-            [c(a[0][0]), c(a[0][1])],
-            [c(a[1][0]), c(a[1][1])],
-        ])
-    };
-    let min = jm([[dot(xi, xit), dot(xi, yit)], [dot(yi, xit), dot(yi, yit)]]);
-    let mout = jm([[dot(xot, xo), dot(xot, yo)], [dot(yot, xo), dot(yot, yo)]]);
-    let mt = crate::optics::mueller::matmul(&mout, &crate::optics::mueller::matmul(&m_sp, &min));
+    let mt = change_bases(&m_sp, (xi, yi, xo, yo), (xit, yit, xot, yot));
     let k = 4.0 * PI * ci * lay.pix * lay.pix;
     let mut out = [[0.0; 4]; 4];
     for r in 0..4 {
