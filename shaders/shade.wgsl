@@ -8,8 +8,10 @@
 // each behind an override constant, it writes the image channels and the range, adds the
 // pixel to the range-resolved profile with its sub-pixel range extent and the pulse
 // (pulse.wgsl, concatenated before this file), and adds the workgroup's sum to the total.
-// Profile and total are accumulated in 64-bit fixed point (two u32 words, integer atomics:
-// exact and order-independent, so results do not depend on scheduling).
+// Profile and total are accumulated in 64-bit fixed point (two u32 words, integer atomics):
+// each addition is rounded to the nearest quantum (2^-40 of the largest value a pixel could
+// take, see render() in src/render/gpu.rs), and the sums are then exact and
+// order-independent, so results do not depend on scheduling.
 // Conventions: src/render/mod.rs. CPU twin: render::twin::shade_pixel.
 
 override CHANNELS: u32 = 16u;      // 16: Mueller, 4: Stokes (M s_tx), 1: intensity (M s_tx)_0
@@ -181,30 +183,36 @@ fn double_angle(c: f32, s: f32) -> vec2<f32> {
 }
 
 // Adds `v` (already in fixed-point units, |v| < 2^62) to the 64-bit two's-complement
-// accumulator at `buf_index` (low word first). The magnitude is split in f32, where both
-// parts are exact and in range (float-to-int conversion of out-of-range values is not
-// portable), and negated in integer arithmetic.
+// accumulator at `buf_index` (low word first), rounded to the nearest unit. The magnitude is
+// split in f32, where both parts are exact and in range (float-to-int conversion of
+// out-of-range values is not portable), and negated in integer arithmetic. The high word
+// is only touched when its increment (high part + carry) is non-zero: the scale puts a
+// pixel's largest possible value near 2^32 units, so most additions are a single atomic.
 fn fixed_add(buf_index: u32, v: f32, is_total: bool) {
-    if (v == 0.0) {
-        return;
-    }
     let a = abs(v);
     let hi_f = floor(a * 2.3283064365386963e-10); // a / 2^32
-    let lo_f = a - hi_f * 4294967296.0;           // exact, in [0, 2^32 - 256]
-    var lo_u = u32(lo_f);
+    var lo_u = u32(round(a - hi_f * 4294967296.0)); // exact, in [0, 2^32 - 256]
     var hi_u = u32(hi_f);
+    if (lo_u == 0u && hi_u == 0u) {
+        return;
+    }
     if (v < 0.0) {
         lo_u = ~lo_u + 1u;
         hi_u = ~hi_u + select(0u, 1u, lo_u == 0u);
     }
+    var old: u32;
     if (is_total) {
-        let old = atomicAdd(&total[2u * buf_index], lo_u);
-        let carry = select(0u, 1u, old + lo_u < old);
-        atomicAdd(&total[2u * buf_index + 1u], hi_u + carry);
+        old = atomicAdd(&total[2u * buf_index], lo_u);
     } else {
-        let old = atomicAdd(&profile[2u * buf_index], lo_u);
-        let carry = select(0u, 1u, old + lo_u < old);
-        atomicAdd(&profile[2u * buf_index + 1u], hi_u + carry);
+        old = atomicAdd(&profile[2u * buf_index], lo_u);
+    }
+    let hi_add = hi_u + select(0u, 1u, old + lo_u < old);
+    if (hi_add != 0u) {
+        if (is_total) {
+            atomicAdd(&total[2u * buf_index + 1u], hi_add);
+        } else {
+            atomicAdd(&profile[2u * buf_index + 1u], hi_add);
+        }
     }
 }
 

@@ -619,7 +619,12 @@ pub fn render(
 
     let n_pix_internal = (w * w) as f64;
     let p_max = 4.0 * std::f64::consts::PI * lay.pix * lay.pix * tables.max_m00.max(1e-300);
-    let fix_scale = (2f64.powi(61) / (p_max * n_pix_internal)).min(f32::MAX as f64 / 4.0);
+    // Fixed-point scale: a pixel's largest possible |value| maps to 2^40 units (a quantum of
+    // 2^-40 of it, far below f32's 2^-24), and the sum of every pixel stays below 2^61. Most
+    // pixels then add less than 2^32 units per bin, which the kernel does with one atomic.
+    let fix_scale = (2f64.powi(40) / p_max)
+        .min(2f64.powi(61) / (p_max * n_pix_internal))
+        .min(f32::MAX as f64 / 4.0);
     if !(fix_scale.is_finite() && fix_scale > 0.0) {
         return Err(Error::param(
             "materials",
