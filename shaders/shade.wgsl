@@ -19,6 +19,9 @@ override WRITE_IMAGE: bool = true;
 override WRITE_RANGE: bool = true;
 override WRITE_PROFILE: bool = true;
 override WRITE_TOTAL: bool = true;
+// Footprint mode (sampled pulses, whose profile is accumulated on the host): the range
+// buffer holds (r0, a, b) per pixel, the range and the widths of its footprint.
+override WRITE_FOOTPRINT: bool = false;
 
 const PI: f32 = 3.14159265358979;
 const MAX_PARTS: u32 = 3u;
@@ -369,7 +372,14 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
             }
         }
         if (WRITE_RANGE) {
-            range_img[pix_index] = select(bitcast<f32>(0x7fc00000u), r0, covered);
+            let r_out = select(bitcast<f32>(0x7fc00000u), r0, covered);
+            if (WRITE_FOOTPRINT) {
+                range_img[3u * pix_index] = r_out;
+                range_img[3u * pix_index + 1u] = wa;
+                range_img[3u * pix_index + 2u] = wb;
+            } else {
+                range_img[pix_index] = r_out;
+            }
         }
         // bound every channel (|M_ij| <= M00) for the fixed-point sums
         let cap = 2.305843e18 / (params.fix_scale * f32(params.width * params.height));

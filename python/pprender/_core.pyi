@@ -265,6 +265,8 @@ class RenderScene:
         range: bool,
         profile: bool,
         device: str,
+        pulse_samples: Sequence[float] | None = None,
+        pulse_spacing: float = 0.0,
     ) -> dict[str, Any]: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...

@@ -180,7 +180,14 @@ class Lidar:
     """The laser and receiver.
 
     ``pulse_fwhm`` (s): Gaussian pulse full width at half maximum (the received pulse; a
-    range FWHM of ``c pulse_fwhm / 2``). ``bin_width`` (m of range): profile bin width,
+    range FWHM of ``c pulse_fwhm / 2``). ``pulse_samples``: a measured or modelled pulse
+    shape instead (received power, any scale, >= 0) sampled every ``pulse_sample_spacing``
+    seconds; the samples are joined linearly (going to zero one spacing beyond each end)
+    and the shape is placed with its centroid at range 0, as the Gaussian's centre. Its
+    profile is exact in f64 but accumulated on the host from the kernel's per-pixel range
+    footprints, several times slower than the Gaussian's on-device accumulation
+    (docs/render-benchmark.md); ``pulse_fwhm`` is then ignored and the defaults below use
+    the FWHM of the Gaussian with the sampled shape's variance. ``bin_width`` (m of range): profile bin width,
     default a quarter of the range FWHM. ``resolution``: image side in pixels, default
     such that a pixel is a quarter of the range FWHM across (clamped to [64, 1024]): about
     1e-3 relative error of cross-sections for generic orientations (edges aligned with the
@@ -198,6 +205,8 @@ class Lidar:
     bistatic_angle: float = 0.0
     polarization: Sequence[float] | None = None
     supersampling: int = 1
+    pulse_samples: Sequence[float] | None = None
+    pulse_sample_spacing: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("wavelength", "pulse_fwhm"):
@@ -229,9 +238,56 @@ class Lidar:
                     "(sqrt(S1^2 + S2^2 + S3^2) > S0)"
                 )
 
+        if self.pulse_samples is not None or self.pulse_sample_spacing is not None:
+            if self.pulse_samples is None or self.pulse_sample_spacing is None:
+                raise Error(
+                    "invalid pulse: pulse_samples and pulse_sample_spacing go together "
+                    "(samples of the received power every pulse_sample_spacing seconds)"
+                )
+            dt = self.pulse_sample_spacing
+            if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+                raise Error(f"invalid pulse_sample_spacing = {dt!r}: a positive, finite time in seconds")
+            try:
+                ps = np.asarray(self.pulse_samples, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise Error("invalid pulse_samples: not an array of numbers") from None
+            if ps.ndim != 1 or not 1 <= len(ps) <= 100_000:
+                raise Error(f"invalid pulse_samples: shape {ps.shape}, expected (n,) with 1 <= n <= 100000")
+            if not np.all(np.isfinite(ps)) or np.any(ps < 0) or not ps.sum() > 0:
+                raise Error("invalid pulse_samples: finite values >= 0 with a positive sum")
+            object.__setattr__(self, "pulse_samples", tuple(float(x) for x in ps))
+
+    @property
+    def sampled(self) -> bool:
+        """Whether the pulse is a sampled shape (``pulse_samples``) rather than a Gaussian."""
+        return self.pulse_samples is not None
+
+    @property
+    def pulse_spacing_range(self) -> float:
+        """Sample spacing of a sampled pulse in range units, ``c pulse_sample_spacing / 2`` (m)."""
+        if self.pulse_sample_spacing is None:
+            raise Error("this Lidar has a Gaussian pulse (no pulse_samples)")
+        return SPEED_OF_LIGHT * self.pulse_sample_spacing / 2.0
+
+    @property
+    def pulse_variance_range(self) -> float:
+        """Variance of the pulse in range units (m^2): sigma^2 for the Gaussian; for a
+        sampled shape that of its piecewise-linear interpolation (each hat adds dt^2/6)."""
+        if self.pulse_samples is None:
+            return self.sigma_range**2
+        p = np.asarray(self.pulse_samples)
+        dt = self.pulse_spacing_range
+        r = dt * np.arange(len(p))
+        w = p / p.sum()
+        mu = float((w * r).sum())
+        return float((w * (r - mu) ** 2).sum()) + dt * dt / 6.0
+
     @property
     def range_fwhm(self) -> float:
-        """Range FWHM of the pulse, ``c pulse_fwhm / 2`` (m)."""
+        """Range FWHM of the pulse, ``c pulse_fwhm / 2`` (m); for a sampled shape, the FWHM
+        of the Gaussian with its variance."""
+        if self.pulse_samples is not None:
+            return _FWHM_PER_SIGMA * math.sqrt(self.pulse_variance_range)
         return SPEED_OF_LIGHT * self.pulse_fwhm / 2.0
 
     @property
@@ -367,6 +423,8 @@ def render(
         range="range" in outputs,
         profile="profile" in outputs,
         device=device,
+        pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
+        pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
     )
     n = len(rot)
     mueller_out = pol is None

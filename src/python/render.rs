@@ -5,6 +5,7 @@ use super::brdf::PyMaterial;
 use crate::brdf::Material;
 use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
 use crate::render::gpu::{self, DeviceChoice, Outputs, SensorSetup};
+use crate::render::pulse::SampledPulse;
 use crate::render::tables::SceneTables;
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
@@ -121,7 +122,8 @@ impl PyRenderScene {
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
     #[pyo3(signature = (rotations, *, resolution, supersampling, bistatic_angle, polarization,
-        sigma_range, bin_width, image, range, profile, device))]
+        sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
+        pulse_spacing=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -137,6 +139,8 @@ impl PyRenderScene {
         range: bool,
         profile: bool,
         device: &str,
+        pulse_samples: Option<Vec<f64>>,
+        pulse_spacing: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
         let rv = rotations.as_array();
         if rv.shape()[1] != 3 || rv.shape()[2] != 3 {
@@ -165,6 +169,9 @@ impl PyRenderScene {
             polarization,
             sigma_range,
             bin_width,
+            pulse: pulse_samples
+                .map(|v| SampledPulse::new(&v, pulse_spacing).map(Arc::new))
+                .transpose()?,
         };
         crate::render::check_sensor(&sensor)?;
         let outputs = Outputs {

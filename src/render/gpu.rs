@@ -7,8 +7,10 @@
 //! requested buffers are created and read back. Conventions: [`crate::render`].
 
 use super::geometry::{gpu_rotation, Mesh, Rot};
+use super::pulse::SampledPulse;
 use super::shaders;
 use crate::error::{Error, Result};
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 use wgpu::util::DeviceExt;
@@ -74,6 +76,7 @@ struct ShadeKey {
     range: bool,
     profile: bool,
     total: bool,
+    footprint: bool,
 }
 
 static CONTEXTS: OnceLock<Mutex<HashMap<DeviceChoice, Arc<Gpu>>>> = OnceLock::new();
@@ -300,6 +303,7 @@ impl Gpu {
             ("WRITE_RANGE", b(key.range)),
             ("WRITE_PROFILE", b(key.profile)),
             ("WRITE_TOTAL", b(key.total)),
+            ("WRITE_FOOTPRINT", b(key.footprint)),
         ];
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let p = self
@@ -471,6 +475,10 @@ pub struct SensorSetup {
     pub sigma_range: f64,
     /// Range-bin width (m).
     pub bin_width: f64,
+    /// A sampled pulse shape (range units, centroid at 0) replacing the Gaussian of
+    /// `sigma_range`. Its profile is accumulated on the host in f64 from the kernel's
+    /// per-pixel footprints (see [`host_profile`]); `sigma_range` is then unused.
+    pub pulse: Option<Arc<SampledPulse>>,
 }
 
 /// The pulse support in standard deviations (weights beyond it are below 1e-9).
@@ -520,11 +528,19 @@ impl Layout {
         let width = s.resolution * s.supersampling;
         let pix = 2.0 * ext / width as f64;
         let max_extent = 0.25 * ext;
-        let support = PULSE_SUPPORT_SIGMAS * s.sigma_range;
+        let support = match &s.pulse {
+            Some(p) => {
+                let (lo, hi) = p.support();
+                lo.abs().max(hi.abs())
+            }
+            None => PULSE_SUPPORT_SIGMAS * s.sigma_range,
+        };
         let half = ext + max_extent + support;
-        let n_bins = ((2.0 * half) / s.bin_width).ceil().max(1.0) as usize;
-        // centre the bins on the range origin
-        let r_min = -0.5 * n_bins as f64 * s.bin_width;
+        // bin edges at integer multiples of the bin width (the same grid for every scene
+        // and pulse with this bin width), symmetric about the range origin
+        let k = (half / s.bin_width).ceil().max(1.0);
+        let n_bins = 2 * k as usize;
+        let r_min = -k * s.bin_width;
         Layout {
             ext,
             width,
@@ -586,14 +602,19 @@ pub fn render(
     }
     // chunk size: every per-chunk buffer within the binding limit, layers within limits
     let px = (w * w) as u64;
+    let kern = KernelOutputs::new(outputs, sensor);
     let per_att = [
-        if outputs.image {
+        if kern.image {
             px * channels as u64 * 4
         } else {
             0
         },
-        if outputs.range { px * 4 } else { 0 },
-        if outputs.profile {
+        if kern.range {
+            px * 4 * if kern.footprint { 3 } else { 1 }
+        } else {
+            0
+        },
+        if kern.profile {
             (lay.n_bins * channels * 8) as u64
         } else {
             0
@@ -662,8 +683,8 @@ pub fn render(
     let scope_v = dev.push_error_scope(wgpu::ErrorFilter::Validation);
     let scope_m = dev.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let result = render_chunks(
-        gpu, &geometry, tables, &params, rotations, outputs, channels, chunk, fix_scale, &lay,
-        sensor,
+        gpu, &geometry, tables, &params, rotations, outputs, kern, channels, chunk, fix_scale,
+        &lay, sensor,
     );
     let oom = pollster::block_on(scope_m.pop());
     let val = pollster::block_on(scope_v.pop());
@@ -688,6 +709,7 @@ fn render_chunks(
     params: &ShadeParams,
     rotations: &[Rot],
     outputs: Outputs,
+    kern: KernelOutputs,
     channels: usize,
     chunk: usize,
     fix_scale: f64,
@@ -702,11 +724,13 @@ fn render_chunks(
     let nb = lay.n_bins;
     let key = ShadeKey {
         channels: channels as u32,
-        image: outputs.image,
-        range: outputs.range,
-        profile: outputs.profile,
+        image: kern.image,
+        range: kern.range,
+        profile: kern.profile,
         total: true,
+        footprint: kern.footprint,
     };
+    let rng_stride = if kern.footprint { 3 } else { 1 };
     let pipeline = gpu.shade_pipeline(key)?;
     let usage_in = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
     let geo_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -745,17 +769,17 @@ fn render_chunks(
     };
     let px = w * w;
     let c = chunk.min(n);
-    let img_size = if outputs.image {
+    let img_size = if kern.image {
         (c * px * channels * 4) as u64
     } else {
         16
     };
-    let rng_size = if outputs.range {
-        (c * px * 4) as u64
+    let rng_size = if kern.range {
+        (c * px * 4 * rng_stride) as u64
     } else {
         16
     };
-    let prof_size = if outputs.profile {
+    let prof_size = if kern.profile {
         (c * nb * channels * 8) as u64
     } else {
         16
@@ -766,13 +790,9 @@ fn render_chunks(
     let prof_buf = mk("profile", prof_size, out_usage);
     let tot_buf = mk("total", tot_size, out_usage);
     let read_usage = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
-    let img_read = outputs
-        .image
-        .then(|| mk("image read", img_size, read_usage));
-    let rng_read = outputs
-        .range
-        .then(|| mk("range read", rng_size, read_usage));
-    let prof_read = outputs
+    let img_read = kern.image.then(|| mk("image read", img_size, read_usage));
+    let rng_read = kern.range.then(|| mk("range read", rng_size, read_usage));
+    let prof_read = kern
         .profile
         .then(|| mk("profile read", prof_size, read_usage));
     let tot_read = mk("total read", tot_size, read_usage);
@@ -893,7 +913,7 @@ fn render_chunks(
             ],
         });
         let mut enc = dev.create_command_encoder(&Default::default());
-        if outputs.profile {
+        if kern.profile {
             enc.clear_buffer(&prof_buf, 0, None);
         }
         enc.clear_buffer(&tot_buf, 0, None);
@@ -938,7 +958,7 @@ fn render_chunks(
                 enc.copy_buffer_to_buffer(src, 0, dst, 0, Some(size));
             };
         let img_bytes = (m * px * channels * 4) as u64;
-        let rng_bytes = (m * px * 4) as u64;
+        let rng_bytes = (m * px * 4 * rng_stride) as u64;
         let prof_bytes = (m * nb * channels * 8) as u64;
         let tot_bytes = (m * channels * 8) as u64;
         if let Some(b) = &img_read {
@@ -978,9 +998,31 @@ fn render_chunks(
             let p = fixed(&read(b, prof_bytes)?);
             out[start * nb * channels..(start + m) * nb * channels].copy_from_slice(&p);
         }
-        if let (Some(b), Some(out)) = (&img_read, image.as_mut()) {
-            let raw = read(b, img_bytes)?;
-            let v: &[f32] = bytemuck::cast_slice(&raw);
+        let raw_img = img_read.as_ref().map(|b| read(b, img_bytes)).transpose()?;
+        let raw_rng = rng_read.as_ref().map(|b| read(b, rng_bytes)).transpose()?;
+        if let (Some(pulse), Some(out)) = (&sensor.pulse, profile.as_mut()) {
+            // sampled pulse: the profile from the per-pixel footprints, in f64 on the host
+            let img: &[f32] = bytemuck::cast_slice(raw_img.as_deref().expect("kernel image"));
+            let foot: &[f32] = bytemuck::cast_slice(raw_rng.as_deref().expect("footprints"));
+            let cap = 2f64.powi(61) / (fix_scale * px as f64);
+            let prof = &mut out[start * nb * channels..(start + m) * nb * channels];
+            prof.par_chunks_mut(nb * channels)
+                .enumerate()
+                .for_each(|(l, p)| {
+                    host_profile(
+                        pulse,
+                        &img[l * px * channels..(l + 1) * px * channels],
+                        &foot[l * px * 3..(l + 1) * px * 3],
+                        channels,
+                        lay.r_min,
+                        sensor.bin_width,
+                        cap,
+                        p,
+                    )
+                });
+        }
+        if let (Some(raw), Some(out)) = (&raw_img, image.as_mut()) {
+            let v: &[f32] = bytemuck::cast_slice(raw);
             downsample_sum(
                 v,
                 m,
@@ -990,9 +1032,15 @@ fn render_chunks(
                 &mut out[start * res * res * channels..],
             );
         }
-        if let (Some(b), Some(out), Some(cov)) = (&rng_read, range.as_mut(), coverage.as_mut()) {
-            let raw = read(b, rng_bytes)?;
-            let v: &[f32] = bytemuck::cast_slice(&raw);
+        if let (Some(raw), Some(out), Some(cov)) = (&raw_rng, range.as_mut(), coverage.as_mut()) {
+            let v: &[f32] = bytemuck::cast_slice(raw);
+            let r0: Vec<f32>;
+            let v = if kern.footprint {
+                r0 = v.iter().step_by(3).copied().collect();
+                &r0[..]
+            } else {
+                v
+            };
             downsample_range(
                 v,
                 m,
@@ -1019,6 +1067,75 @@ fn render_chunks(
         pixel_size: lay.pix * ss as f64,
         extent: lay.ext,
     })
+}
+
+/// What the shade kernel computes and what is read back, from the request: a sampled
+/// pulse's profile needs the image and the footprints at the internal resolution, and the
+/// kernel then skips its own (Gaussian) profile.
+#[derive(Debug, Clone, Copy)]
+pub struct KernelOutputs {
+    pub image: bool,
+    pub range: bool,
+    pub profile: bool,
+    pub footprint: bool,
+}
+
+impl KernelOutputs {
+    pub fn new(outputs: Outputs, sensor: &SensorSetup) -> Self {
+        let host = outputs.profile && sensor.pulse.is_some();
+        KernelOutputs {
+            image: outputs.image || host,
+            range: outputs.range || host,
+            profile: outputs.profile && !host,
+            footprint: host,
+        }
+    }
+}
+
+/// The profile of one attitude for a sampled pulse, on the host in f64: every covered
+/// pixel (`foot` = (r0, a, b) per pixel, r0 NaN where empty; `img` its `ch` channels)
+/// adds `W_k = C(e_{k+1} - r0) - C(e_k - r0)` times its channels to the bins its footprint
+/// and the pulse reach, `C` = [`SampledPulse::cdf_box2`]. The channels are clamped to
+/// `cap` as in the kernel's fixed-point sums, so that the profile sums to the total.
+#[allow(clippy::too_many_arguments)]
+pub fn host_profile(
+    pulse: &SampledPulse,
+    img: &[f32],
+    foot: &[f32],
+    ch: usize,
+    r_min: f64,
+    bin_width: f64,
+    cap: f64,
+    out: &mut [f64],
+) {
+    let nb = out.len() / ch;
+    let (lo, hi) = pulse.support();
+    let mut edges = Vec::new();
+    let mut weights = Vec::new();
+    for (k, f) in foot.chunks_exact(3).enumerate() {
+        let r0 = f[0] as f64;
+        let v = &img[k * ch..(k + 1) * ch];
+        if r0.is_nan() || v[0] == 0.0 {
+            continue;
+        }
+        let (a, b) = (f[1] as f64, f[2] as f64);
+        let half = 0.5 * (a + b);
+        let k0 = (((r0 - half + lo - r_min) / bin_width).floor().max(0.0) as usize).min(nb - 1);
+        let k1 = (((r0 + half + hi - r_min) / bin_width).floor().max(0.0) as usize).min(nb - 1);
+        edges.clear();
+        edges.extend((k0..=k1 + 1).map(|j| r_min + j as f64 * bin_width));
+        weights.clear();
+        weights.resize(k1 + 1 - k0, 0.0);
+        pulse.bin_weights(r0, a, b, &edges, &mut weights);
+        for (j, &wt) in weights.iter().enumerate() {
+            if wt != 0.0 {
+                let o = &mut out[(k0 + j) * ch..(k0 + j + 1) * ch];
+                for c in 0..ch {
+                    o[c] += wt * (v[c] as f64).clamp(-cap, cap);
+                }
+            }
+        }
+    }
 }
 
 /// Sum `ss x ss` sub-pixels into each output pixel.
@@ -1125,6 +1242,7 @@ pub(crate) mod tests {
             polarization: None,
             sigma_range: 0.01,
             bin_width: 0.02,
+            pulse: None,
         }
     }
 

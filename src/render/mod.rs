@@ -44,7 +44,11 @@
 //! the pixel), a trapezoid of widths `a = |gx| delta`, `b = |gy| delta`; convolved with
 //! the received pulse (range FWHM `c tau / 2`) and integrated over each bin
 //! ([`pulse`]). The bins cover the bounding sphere plus the pulse support, so the weights
-//! of every pixel sum to one and the profile sums to the total cross-section.
+//! of every pixel sum to one and the profile sums to the total cross-section. Bin edges
+//! are integer multiples of the bin width, symmetric about the range origin. The pulse is
+//! a Gaussian (accumulated on the device) or a sampled shape with its centroid at range 0
+//! (piecewise linear, [`pulse::SampledPulse`]; accumulated on the host in f64 from the
+//! kernel's per-pixel footprints `(r0, a, b)`, see [`gpu::host_profile`]).
 
 pub mod geometry;
 pub mod gpu;

@@ -581,6 +581,11 @@ impl SampledPulse {
         self.var
     }
 
+    /// Where the interpolated pulse is non-zero: `(first knot, last knot)` (range units).
+    pub fn support(&self) -> (f64, f64) {
+        (self.r0, self.r_end())
+    }
+
     fn knot(&self, j: usize) -> f64 {
         self.r0 + j as f64 * self.dt
     }

@@ -234,14 +234,19 @@ pub fn render_cpu(
                     tot[c] += vals[c];
                 }
                 if outputs.profile && vals[0] != 0.0 {
-                    pulse::bin_weights_f64(
-                        s.range,
-                        s.widths.0,
-                        s.widths.1,
-                        sensor.sigma_range,
-                        &edges,
-                        &mut weights,
-                    );
+                    match &sensor.pulse {
+                        Some(p) => {
+                            p.bin_weights(s.range, s.widths.0, s.widths.1, &edges, &mut weights)
+                        }
+                        None => pulse::bin_weights_f64(
+                            s.range,
+                            s.widths.0,
+                            s.widths.1,
+                            sensor.sigma_range,
+                            &edges,
+                            &mut weights,
+                        ),
+                    }
                     for (b, &wt) in weights.iter().enumerate() {
                         if wt != 0.0 {
                             for c in 0..ch {
