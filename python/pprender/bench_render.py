@@ -6,7 +6,8 @@ report (``--write``: also to ``docs/render-benchmark.md``, or ``--write PATH``).
 Scene: the default 3U CubeSat of :func:`pprender.models.cubesat` (bus, deployed wings,
 antenna; about 12k triangles) with an aluminium bus (Beckmann alpha 0.15, single + double +
 multiple), glass-covered cells (alpha 0.05), white-painted panel backs and an aluminium
-antenna, monostatic at 1064 nm, 100 ps pulse, 128x128 pixels. A realization is one
+antenna, monostatic at 1064 nm, 100 ps pulse, 128x128 pixels (and the same pulse as samples every
+5 ps, whose profile takes the sampled-pulse path: accumulated on the host in f64). A realization is one
 attitude. Rates are batch size / best wall time of ``--repeats`` calls of a batch of random
 attitudes; the one-off costs (device creation, shader compilation, material tables) are
 excluded from the rates and listed separately.
@@ -44,6 +45,8 @@ from pprender import materials, models
 from pprender.bench import cpu_model, emit_report, load_average, threads_available
 
 RES = 128
+# a 100 ps FWHM Gaussian sampled every 5 ps over +-150 ps (the sampled-pulse path)
+SAMPLED_PULSE = np.exp(-0.5 * (np.arange(-30, 31) * 5e-12 / (100e-12 / (2 * math.sqrt(2 * math.log(2))))) ** 2)
 
 
 def cubesat_scene(terms: tuple[str, ...] = ("single", "double", "multiple")) -> pprender.Scene:
@@ -160,6 +163,9 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
         ("profile only (Mueller, 16 channels)", pprender.Lidar(resolution=RES), ("profile",)),
         ("profile only (Stokes, horizontal transmit)", pprender.Lidar(resolution=RES, polarization=[1, 1, 0, 0]), ("profile",)),
         ("cross-section only (Stokes)", pprender.Lidar(resolution=RES, polarization=[1, 1, 0, 0]), ()),
+        ("profile only (Stokes), sampled pulse: host accumulation", pprender.Lidar(
+            resolution=RES, polarization=[1, 1, 0, 0], pulse_samples=SAMPLED_PULSE, pulse_sample_spacing=5e-12,
+        ), ("profile",)),
     ]
     t0 = time.perf_counter()
     pprender.render(scene, cases[0][1], q[:1], outputs=cases[0][2], device=device)
