@@ -4,9 +4,13 @@
 //! layer of an R32Uint texture array (`shaders/visibility.wgsl`), then one compute dispatch
 //! (`shaders/shade.wgsl`, specialized by override constants to the requested outputs)
 //! shades every pixel and accumulates the profile and total in 64-bit fixed point. Only the
-//! requested buffers are created and read back. Conventions: [`crate::render`].
+//! requested buffers are created and read back. Bistatic (`beta > 0`) the same raster
+//! pipeline first draws each attitude from the transmitter too (rotations
+//! [`transmitter_rotation`]) into a second texture array, which the shade kernel (compiled
+//! with `SHADOWS`) reads to test cast shadows; monostatic neither the pass nor the test
+//! exists. Conventions: [`crate::render`].
 
-use super::geometry::{gpu_rotation, Mesh, Rot};
+use super::geometry::{gpu_rotation, transmitter_rotation, Mesh, Rot};
 use super::shaders;
 use crate::error::{Error, Result};
 use std::collections::HashMap;
@@ -74,6 +78,8 @@ struct ShadeKey {
     range: bool,
     profile: bool,
     total: bool,
+    /// Transmitter cast shadows (bistatic only).
+    shadows: bool,
 }
 
 static CONTEXTS: OnceLock<Mutex<HashMap<DeviceChoice, Arc<Gpu>>>> = OnceLock::new();
@@ -256,6 +262,17 @@ impl Gpu {
                 storage(6, false, cs),
                 storage(7, false, cs),
                 storage(8, false, cs),
+                // triangle ids seen from the transmitter (the receiver's when monostatic)
+                wgpu::BindGroupLayoutEntry {
+                    binding: 9,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let shade_pipeline_layout =
@@ -300,6 +317,7 @@ impl Gpu {
             ("WRITE_RANGE", b(key.range)),
             ("WRITE_PROFILE", b(key.profile)),
             ("WRITE_TOTAL", b(key.total)),
+            ("SHADOWS", b(key.shadows)),
         ];
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let p = self
@@ -324,6 +342,17 @@ impl Gpu {
     }
 }
 
+/// Side of the transmitter's id map for a receiver image side `w` (bistatic cast shadows):
+/// twice `w` (texels of half a pixel, so that occluders down to about half a pixel wide are
+/// seen), or `w` itself where that would exceed 4096 texels or the device's limit.
+pub fn transmitter_map_width(w: usize, max_dim: usize) -> usize {
+    if 2 * w <= max_dim.min(4096) {
+        2 * w
+    } else {
+        w
+    }
+}
+
 /// Uniform block of `shade.wgsl` (layout checked against the WGSL struct in a test).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable, Debug)]
@@ -345,7 +374,9 @@ pub struct ShadeParams {
     pub has_normals: u32,
     pub beta: f32,
     pub max_extent: f32,
-    pub _pad: [f32; 2],
+    /// Side of the transmitter's id map (texels; bistatic only).
+    pub tx_width: u32,
+    pub _pad: f32,
 }
 
 /// Uniform block of `visibility.wgsl`.
@@ -606,8 +637,15 @@ pub fn render(
         .min(gpu.limits.max_texture_array_layers as usize)
         .min(gpu.limits.max_compute_workgroups_per_dimension as usize)
         .min(256);
-    // keep the per-chunk device memory modest (tri ids + depth + outputs)
-    let mem_per = per_att.iter().sum::<u64>() + px * 4;
+    // keep the per-chunk device memory modest (tri ids + depth + outputs, plus the
+    // transmitter's tri ids + depth when bistatic)
+    let tx_w = transmitter_map_width(w, gpu.info.max_texture_dimension_2d as usize);
+    let shadow_maps = if sensor.bistatic_angle > 0.0 {
+        (tx_w * tx_w * 8) as u64
+    } else {
+        0
+    };
+    let mem_per = per_att.iter().sum::<u64>() + px * 4 + shadow_maps;
     chunk = chunk.min(((512u64 << 20) / mem_per.max(1)).max(1) as usize);
     if chunk == 0 || biggest > max_binding {
         return Err(Error::param(
@@ -654,7 +692,8 @@ pub fn render(
         has_normals: mesh.normals.is_some() as u32,
         beta: beta as f32,
         max_extent: lay.max_extent as f32,
-        _pad: [0.0; 2],
+        tx_width: tx_w as u32,
+        _pad: 0.0,
     };
     let fix_scale = params.fix_scale as f64; // what the kernel uses
 
@@ -706,6 +745,7 @@ fn render_chunks(
         range: outputs.range,
         profile: outputs.profile,
         total: true,
+        shadows: sensor.bistatic_angle > 0.0,
     };
     let pipeline = gpu.shade_pipeline(key)?;
     let usage_in = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
@@ -812,6 +852,48 @@ fn render_chunks(
     };
     let id_views: Vec<_> = (0..c as u32).map(|l| layer_view(&ids, l)).collect();
     let depth_views: Vec<_> = (0..c as u32).map(|l| layer_view(&depth, l)).collect();
+    // bistatic: the triangle ids seen from the transmitter (same square, tx_width texels)
+    let txw = params.tx_width;
+    let tx_desc = |format, usage| wgpu::TextureDescriptor {
+        label: Some("transmitter target"),
+        size: wgpu::Extent3d {
+            width: txw,
+            height: txw,
+            depth_or_array_layers: c as u32,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    };
+    let tx_ids = key.shadows.then(|| {
+        dev.create_texture(&tx_desc(
+            wgpu::TextureFormat::R32Uint,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        ))
+    });
+    let tx_depth = key.shadows.then(|| {
+        dev.create_texture(&tx_desc(
+            wgpu::TextureFormat::Depth32Float,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        ))
+    });
+    let tx_depth_views: Vec<_> = match &tx_depth {
+        Some(t) => (0..c as u32).map(|l| layer_view(t, l)).collect(),
+        None => vec![],
+    };
+    let tx_array_view = tx_ids.as_ref().map(|t| {
+        t.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        })
+    });
+    let tx_views: Vec<_> = match &tx_ids {
+        Some(t) => (0..c as u32).map(|l| layer_view(t, l)).collect(),
+        None => vec![],
+    };
 
     let mut image = outputs
         .image
@@ -832,23 +914,39 @@ fn render_chunks(
             contents: bytemuck::cast_slice(&rots),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let vis_bg = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("visibility"),
-            layout: &gpu.vis_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: geo_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: rot_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: vis_uni.as_entire_binding(),
-                },
-            ],
+        let vis_group = |rot: &wgpu::Buffer| {
+            dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("visibility"),
+                layout: &gpu.vis_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: geo_buf.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: rot.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: vis_uni.as_entire_binding(),
+                    },
+                ],
+            })
+        };
+        let vis_bg = vis_group(&rot_buf);
+        // bistatic: R_tx = R_y(-beta) R, computed in f64 (wi -> +z)
+        let tx_bg = key.shadows.then(|| {
+            let rots: Vec<[f32; 12]> = rotations[start..start + m]
+                .iter()
+                .map(|r| gpu_rotation(&transmitter_rotation(r, sensor.bistatic_angle)))
+                .collect();
+            let buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("transmitter rotations"),
+                contents: bytemuck::cast_slice(&rots),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+            vis_group(&buf)
         });
         let shade_bg = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shade"),
@@ -890,6 +988,12 @@ fn render_chunks(
                     binding: 8,
                     resource: tot_buf.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: wgpu::BindingResource::TextureView(
+                        tx_array_view.as_ref().unwrap_or(&ids_array_view),
+                    ),
+                },
             ],
         });
         let mut enc = dev.create_command_encoder(&Default::default());
@@ -897,34 +1001,41 @@ fn render_chunks(
             enc.clear_buffer(&prof_buf, 0, None);
         }
         enc.clear_buffer(&tot_buf, 0, None);
-        for l in 0..m {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("visibility"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &id_views[l],
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth_views[l],
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
+        // the receiver's view, then (bistatic) the transmitter's
+        let mut views_and_groups = vec![(&id_views, &depth_views, &vis_bg)];
+        if let Some(bg) = &tx_bg {
+            views_and_groups.push((&tx_views, &tx_depth_views, bg));
+        }
+        for (views, dviews, bg) in views_and_groups {
+            for l in 0..m {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("visibility"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &views[l],
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &dviews[l],
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
+                        stencil_ops: None,
                     }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&gpu.vis_pipeline);
-            pass.set_bind_group(0, &vis_bg, &[]);
-            let l = l as u32;
-            pass.draw(0..(3 * params.n_tri), l..l + 1);
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(&gpu.vis_pipeline);
+                pass.set_bind_group(0, bg, &[]);
+                let l = l as u32;
+                pass.draw(0..(3 * params.n_tri), l..l + 1);
+            }
         }
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
