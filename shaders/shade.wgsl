@@ -13,6 +13,38 @@
 // take, see render() in src/render/gpu.rs), and the sums are then exact and
 // order-independent, so results do not depend on scheduling.
 // Conventions: src/render/mod.rs. CPU twin: render::twin::shade_pixel.
+//
+// Transmitter cast shadows (SHADOWS: set when the bistatic angle beta > 0; monostatic the
+// receiver's visibility already implies illumination and the test is compiled out). A
+// second raster pass wrote the triangle seen from the transmitter at each texel centre
+// (`tx_ids`: the same orthographic square [-ext, ext]^2 at `tx_width` texels a side, twice
+// the receiver's up to 4096 (src/render/gpu.rs, transmitter_map_width); rotation
+// R_tx = R_y(-beta) R, so wi maps to +z). A point p (the pixel's shaded point on its
+// visible triangle T, tested only when cos_i > 0 and cos_o > 0) is projected to the
+// transmitter frame, q = R_y(-beta) p, and the distinct triangles U != T of the 3x3 texels
+// around q are candidates. p is
+//   0. SHADOWED if T's geometric normal (on the side the receiver sees) does not face the
+//      transmitter: the facet itself is in the way (with smooth shading the interpolated
+//      normal may still face it, just behind the terminator);
+//   1. SHADOWED if a candidate covers q (closed point-in-triangle test in the transmitter
+//      frame, on its own vertices) and lies closer to the transmitter than p there by more
+//      than eps_z = 1e-5 ext: exact, no depth-map bias, sharp shadow edges;
+//   2. else SHADOWED if T is none of the nine texels' triangles and every one of the nine
+//      is a candidate whose plane, extrapolated to q, is closer than p by more than
+//      eps_z + 2.5 t |g_U - g_T| (t the texel side, g the depth gradients of U and of T's
+//      plane in the transmitter frame: a texel centre in U lies within 2.12 t of q, so two
+//      planes of one smooth surface differ by no more at q). This catches q deep inside an
+//      occluding surface whose triangle at q covers no texel centre (a fine tessellation
+//      seen obliquely, every triangle a sliver);
+//   3. else LIT.
+// A shadowed pixel contributes nothing (zero Mueller matrix, no profile or total) but stays
+// covered and keeps its range: the receiver does see the surface there.
+// Limits: occluders thinner than about a texel (wires, the rims of thin plates seen edge-on)
+// may cover no texel centre near q and are then missed at q (rule 1), and rule 2 needs
+// all nine texels inside the occluder, so such misses are light leaking through within a
+// texel of a shadow's edge or along thin shadows; occluders within eps_z of p in depth
+// are ignored; shading normals do not enter (the test is geometric).
+// CPU twin: render::twin::shadowed (exact f64 ray casting, independent of this rule).
 
 override CHANNELS: u32 = 16u;      // 16: Mueller, 4: Stokes (M s_tx), 1: intensity (M s_tx)_0
 override WRITE_IMAGE: bool = true;
@@ -22,11 +54,13 @@ override WRITE_TOTAL: bool = true;
 // Footprint mode (sampled pulses, whose profile is accumulated on the host): the range
 // buffer holds (r0, a, b) per pixel, the range and the widths of its footprint.
 override WRITE_FOOTPRINT: bool = false;
+override SHADOWS: bool = false;    // transmitter cast shadows (beta > 0), see above
 
 const PI: f32 = 3.14159265358979;
 const MAX_PARTS: u32 = 3u;
 const HEADER_WORDS: u32 = 12u;
 const LN_FLOOR_F32: f32 = -87.0;
+const SHADOW_EPS: f32 = 1e-5;      // cast shadows: eps_z = SHADOW_EPS ext
 
 struct Params {
     width: u32,
@@ -46,8 +80,8 @@ struct Params {
     has_normals: u32,
     beta: f32,         // bistatic angle (rad)
     max_extent: f32,   // cap on the sub-pixel range widths (m)
+    tx_width: u32,     // side of the transmitter's id map (texels; SHADOWS only)
     _pad0: f32,
-    _pad1: f32,
 }
 
 @group(0) @binding(0) var tri_ids: texture_2d_array<u32>;
@@ -59,6 +93,9 @@ struct Params {
 @group(0) @binding(6) var<storage, read_write> range_img: array<f32>;
 @group(0) @binding(7) var<storage, read_write> profile: array<atomic<u32>>;
 @group(0) @binding(8) var<storage, read_write> total: array<atomic<u32>>;
+// triangle id + 1 seen from the transmitter, tx_width^2 per layer (SHADOWS only;
+// monostatic, tri_ids is bound here and never read)
+@group(0) @binding(9) var tx_ids: texture_2d_array<u32>;
 
 var<workgroup> wg_sum: array<f32, 1024>;
 
@@ -219,6 +256,96 @@ fn fixed_add(buf_index: u32, v: f32, is_total: bool) {
     }
 }
 
+// ---- transmitter cast shadows (SHADOWS; rule and limits at the top of this file) ----
+
+// Telescope frame to the transmitter frame: R_y(-beta), wi = (sin beta, 0, cos beta) -> +z.
+fn to_tx(v: vec3<f32>) -> vec3<f32> {
+    let c = params.wi.z;
+    let s = params.wi.x;
+    return vec3<f32>(c * v.x - s * v.z, v.y, s * v.x + c * v.z);
+}
+
+// What candidate `u` says about q (transmitter frame); rules at the top of this file.
+const CAND_LIT: u32 = 0u;    // neither of the below
+const CAND_CLOSER: u32 = 1u; // beside q, its plane at q closer by more than its margin (rule 2)
+const CAND_COVERS: u32 = 2u; // covers q and closer than q by more than e_z (rule 1)
+
+fn candidate(u: u32, rot: mat3x3<f32>, q: vec3<f32>, g_t: vec2<f32>, reach: f32, e_z: f32) -> u32 {
+    let a = to_tx(rot * geometry[3u * u].xyz);
+    let b = to_tx(rot * geometry[3u * u + 1u].xyz);
+    let c = to_tx(rot * geometry[3u * u + 2u].xyz);
+    let n = cross(b - a, c - a); // n.z: twice the projected signed area
+    if (n.z == 0.0) {
+        return CAND_LIT;
+    }
+    // edge functions (barycentric weights x n.z): all of n.z's sign inside
+    let fa = (c.x - b.x) * (q.y - b.y) - (c.y - b.y) * (q.x - b.x);
+    let fb = (a.x - c.x) * (q.y - c.y) - (a.y - c.y) * (q.x - c.x);
+    let fc = (b.x - a.x) * (q.y - a.y) - (b.y - a.y) * (q.x - a.x);
+    let lead = (fa * a.z + fb * b.z + fc * c.z) / n.z - q.z; // its plane at q, minus q
+    let sg = sign(n.z);
+    if (sg * fa >= 0.0 && sg * fb >= 0.0 && sg * fc >= 0.0) {
+        return select(CAND_LIT, CAND_COVERS, lead > e_z);
+    }
+    if (reach == 0.0) {
+        return CAND_LIT; // rule 2 is off
+    }
+    // beside q: its plane extrapolated over at most `reach`, against T's plane (gradient
+    // g_t) extrapolated as far: two planes of one smooth surface differ by reach |g_u - g_t|
+    let g_u = -n.xy / n.z;
+    return select(CAND_LIT, CAND_CLOSER, lead > e_z + reach * length(g_u - g_t));
+}
+
+// Whether the point p (telescope frame) of visible triangle `tri` (vertices p0, p1, p2) is
+// in the transmitter's shadow in layer `layer`.
+fn in_shadow(tri: u32, rot: mat3x3<f32>, p: vec3<f32>, p0: vec3<f32>, p1: vec3<f32>,
+             p2: vec3<f32>, layer: u32) -> bool {
+    let q = to_tx(p);
+    let w = i32(params.tx_width);
+    let tpix = 2.0 * params.ext / f32(params.tx_width);
+    let tc = i32(floor((q.x + params.ext) / tpix));
+    let tr = i32(floor((params.ext - q.y) / tpix));
+    let e = SHADOW_EPS * params.ext;
+    // T's depth gradient in the transmitter frame; T edge-on to it: rule 1 only
+    let nt = to_tx(cross(p1 - p0, p2 - p0));
+    let edge_on = abs(nt.z) <= 1e-6 * length(nt);
+    let g_t = select(-nt.xy / nt.z, vec2<f32>(0.0), edge_on);
+    // every texel centre of the 3x3 lies within 1.5 sqrt(2) tpix of q
+    let reach = select(2.5 * tpix, 0.0, edge_on);
+    var ids: array<u32, 9>;
+    var res: array<u32, 9>;
+    var n_ids = 0u;
+    var all_closer = true; // rule 2, while it can still hold
+    for (var dr = -1; dr <= 1; dr++) {
+        for (var dc = -1; dc <= 1; dc++) {
+            let r = tr + dr;
+            let c = tc + dc;
+            var id = 0u;
+            if (r >= 0 && r < w && c >= 0 && c < w) {
+                id = textureLoad(tx_ids, vec2<i32>(c, r), i32(layer), 0).x;
+            }
+            if (id == 0u || id > params.n_tri || id == tri + 1u) {
+                all_closer = false;
+                continue;
+            }
+            var k = 0u;
+            while (k < n_ids && ids[k] != id) {
+                k++;
+            }
+            if (k == n_ids) {
+                ids[k] = id;
+                res[k] = candidate(id - 1u, rot, q, g_t, select(0.0, reach, all_closer), e);
+                n_ids++;
+                if (res[k] == CAND_COVERS) {
+                    return true;
+                }
+            }
+            all_closer = all_closer && res[k] == CAND_CLOSER;
+        }
+    }
+    return all_closer;
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
            @builtin(local_invocation_index) lidx: u32) {
@@ -283,7 +410,12 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                 }
                 let cos_i = dot(n, wi);
                 let cos_o = dot(n, wo);
-                if (cos_i > 0.0 && cos_o > 0.0) {
+                var lit = cos_i > 0.0 && cos_o > 0.0;
+                if (SHADOWS && lit) {
+                    // rule 0: a facet turned away from the transmitter shadows itself
+                    lit = dot(ng, wi) > 0.0 && !in_shadow(tri, rot, p, p0, p1, p2, layer);
+                }
+                if (lit) {
                     // table coordinates (src/brdf/table.rs, bisector frame): b = bisector,
                     // e_phi = normalize(n x b), e_theta = e_phi x b,
                     // psi = atan2((wi - wo).e_phi, (wi - wo).e_theta), mirrored when < 0

@@ -151,3 +151,18 @@ def test_sampled_pulse_batches_images_and_sums():
 def test_bad_pulse_input_names_the_parameter(kwargs, name):
     with pytest.raises(pprender.Error, match=name):
         pprender.Lidar(**kwargs)
+
+
+def test_sampled_pulse_with_bistatic_shadows_sums_to_the_total():
+    # the host accumulation reads the kernel's image, so shadowed pixels (zero) add nothing
+    scene = pprender.Scene(models.cubesat("3U"), lambertian(0.4))
+    q = np.array([[0.9, 0.3, 0.2, 0.1]])
+    q /= np.linalg.norm(q)
+    kw = dict(resolution=96, bistatic_angle=math.radians(40.0))
+    sampled = pprender.render(scene, pprender.Lidar(pulse_samples=[1.0, 2.0, 1.0], pulse_sample_spacing=30e-12, **kw),
+                              q, outputs=("profile", "mueller", "range"))
+    gauss = pprender.render(scene, pprender.Lidar(**kw), q, outputs=("mueller",))
+    np.testing.assert_array_equal(sampled.mueller, gauss.mueller)
+    assert np.any(sampled.mask & (sampled.mueller[..., 0, 0] == 0))  # covered but dark: shadowed
+    np.testing.assert_allclose(sampled.profile.sum(axis=1), sampled.cross_section, rtol=0,
+                               atol=1e-6 * sampled.cross_section[0, 0, 0])

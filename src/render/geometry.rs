@@ -224,6 +224,18 @@ pub fn rotate(r: &Rot, v: [f64; 3]) -> [f64; 3] {
     ]
 }
 
+/// The transmitter's view of attitude `r` for the bistatic angle `beta`:
+/// `R_tx = R_y(-beta) R`, which maps `wi = (sin beta, 0, cos beta)` to `+z` (rows
+/// `c R_0 - s R_2`, `R_1`, `s R_0 + c R_2`). The cast-shadow raster draws with it.
+pub fn transmitter_rotation(r: &Rot, beta: f64) -> Rot {
+    let (s, c) = beta.sin_cos();
+    [
+        [0, 1, 2].map(|k| c * r[0][k] - s * r[2][k]),
+        r[1],
+        [0, 1, 2].map(|k| s * r[0][k] + c * r[2][k]),
+    ]
+}
+
 /// GPU layout of a rotation: WGSL `mat3x3<f32>` (3 columns padded to vec4).
 pub fn gpu_rotation(r: &Rot) -> [f32; 12] {
     let mut out = [0.0f32; 12];
@@ -249,6 +261,21 @@ mod tests {
         check_rotations(&r).unwrap();
         assert!(rotations_from_quaternions(&[[1.0, 0.1, 0.0, 0.0]]).is_err());
         assert!(rotations_from_quaternions(&[[f64::NAN, 0.0, 0.0, 0.0]]).is_err());
+    }
+
+    #[test]
+    fn transmitter_rotation_maps_wi_to_z() {
+        let n = (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt();
+        let r = rotations_from_quaternions(&[[0.9, 0.3, -0.2, 0.25].map(|x: f64| x / n)]).unwrap();
+        let beta = 0.4f64;
+        let t = transmitter_rotation(&r[0], beta);
+        check_rotations(&[t]).unwrap();
+        // a body vector that R maps to wi goes to +z
+        let wi = [beta.sin(), 0.0, beta.cos()];
+        let body = [0, 1, 2].map(|k| (0..3).map(|j| r[0][j][k] * wi[j]).sum::<f64>());
+        let v = rotate(&t, body);
+        assert!(v[0].abs() < 1e-15 && v[1].abs() < 1e-15 && (v[2] - 1.0).abs() < 1e-15);
+        assert_eq!(transmitter_rotation(&r[0], 0.0), r[0]);
     }
 
     #[test]

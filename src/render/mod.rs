@@ -22,6 +22,28 @@
 //! Visibility is sampled at pixel centres (rasterization); a pixel counts fully for its
 //! centre's triangle.
 //!
+//! **Illumination and cast shadows.** A visible point is lit when `cos(theta_i) > 0` and
+//! `cos(theta_o) > 0` (shading normal) and, bistatic (`beta > 0`), it is not in the
+//! transmitter's shadow. Monostatic the receiver's visibility implies illumination and no
+//! shadow test runs (the kernel is compiled without it: results are unchanged bit for
+//! bit). Bistatic, the mesh is also rasterized from the transmitter (rotation
+//! `R_tx = R_y(-beta) R`, which maps `wi` to `+z`; the same square `[-ext, ext]`, at twice
+//! the receiver's texels per side up to 4096) into a map of triangle ids, and the point
+//! `p` of triangle `T` is shadowed when (0) `T`'s geometric normal, on the side the
+//! receiver sees, does not face `wi` (a facet behind the terminator of a smooth-shaded
+//! surface), or (1) a triangle of the map's 3x3 texels around `p`'s projection covers
+//! that projection (exact point-in-triangle test on its vertices) and is closer to the
+//! transmitter than `p` by more than `1e-5 ext`, or (2) `T` is none of those nine texels'
+//! triangles and all nine lie, by their planes at `p`, closer than `p` by more than
+//! `1e-5 ext` plus their slope mismatch with `T` over 2.5 texels (deep inside a finely
+//! tessellated occluder seen obliquely). A shadowed pixel returns nothing (zero Mueller
+//! matrix, no profile or total) but stays covered, and its range is still reported (the
+//! receiver sees the surface). Limits: occluders thinner than about a texel (a wire, the
+//! rim of a thin plate edge-on to the transmitter) can be missed, which lets light leak
+//! within a texel of a shadow's edge or through a thin shadow; occluders within
+//! `1e-5 ext` of `p` in depth are ignored. Details at the top of `shaders/shade.wgsl`;
+//! the CPU twin ([`twin::shadowed`]) casts the ray toward `wi` exactly.
+//!
 //! **Range.** The one-way range of a surface point `p` relative to the body origin is
 //! `r = -p . (wi + wo) / 2` (half the extra round-trip path; `r = -Z` monostatic): positive
 //! is farther from the sensor. The profile's time axis is `t = 2 r / c`.

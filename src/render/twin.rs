@@ -3,9 +3,11 @@
 //! `shaders/shade.wgsl`) with any BRDF: the material's tables (what the GPU uses) or the
 //! exact core evaluation. The Stokes bases here come from [`crate::optics::frames`]'s
 //! `beam_bases` in a local frame (the kernel builds them from cross products), so the
-//! comparison also checks the frame handling. Conventions: [`crate::render`].
+//! comparison also checks the frame handling. Transmitter cast shadows (bistatic) are
+//! decided here by exact ray casting in f64 ([`shadowed`]), independently of the kernel's
+//! shadow-map rule. Conventions: [`crate::render`].
 
-use super::geometry::{rotate, Mesh, Rot};
+use super::geometry::{rotate, transmitter_rotation, Mesh, Rot};
 use super::gpu::{Layout, Outputs, Rendered, SensorSetup};
 use super::pulse;
 use crate::optics::frames::{beam_bases, change_bases, cross, dot, normalize, Frame, V3};
@@ -72,6 +74,8 @@ pub struct PixelSample {
     pub range: f64,
     /// Sub-pixel range widths `(a, b)` (m).
     pub widths: (f64, f64),
+    /// The shaded point (telescope frame, m).
+    pub point: V3,
 }
 
 /// `brdf(material, wi_local, wo_local)`: the Mueller BRDF in the `Sp` frame, local `n = z`.
@@ -135,6 +139,7 @@ pub fn shade_pixel(
         mueller: [[0.0; 4]; 4],
         range,
         widths,
+        point: [x, y, z],
     };
     if ci <= 0.0 || co <= 0.0 {
         return Some(zero);
@@ -177,7 +182,89 @@ pub fn shade_pixel(
         mueller: out,
         range,
         widths,
+        point: [x, y, z],
     })
+}
+
+/// The mesh seen from the transmitter (frame `R_tx = R_y(-beta) R`, `wi` along `+z`):
+/// every triangle's vertices and its projected bounding box, for [`shadowed`].
+pub struct TransmitterView {
+    beta: f64,
+    tris: Vec<[V3; 3]>,
+    /// `[xmin, xmax, ymin, ymax]` per triangle.
+    boxes: Vec<[f64; 4]>,
+    /// Hits closer than this along `wi` (m) are ignored (`1e-9 ext`).
+    offset: f64,
+}
+
+impl TransmitterView {
+    pub fn new(mesh: &Mesh, rot: &Rot, beta: f64) -> Self {
+        let r = transmitter_rotation(rot, beta);
+        let tris: Vec<[V3; 3]> = mesh
+            .faces
+            .iter()
+            .map(|f| f.map(|k| rotate(&r, mesh.vertices[k as usize])))
+            .collect();
+        let boxes = tris
+            .iter()
+            .map(|t| {
+                let (x, y) = (t.map(|v| v[0]), t.map(|v| v[1]));
+                [
+                    x[0].min(x[1]).min(x[2]),
+                    x[0].max(x[1]).max(x[2]),
+                    y[0].min(y[1]).min(y[2]),
+                    y[0].max(y[1]).max(y[2]),
+                ]
+            })
+            .collect();
+        TransmitterView {
+            beta,
+            tris,
+            boxes,
+            offset: 1e-9 * mesh.radius,
+        }
+    }
+}
+
+/// Whether the point `p` (telescope frame) of triangle `tri` is in the transmitter's
+/// shadow: the side of `tri` the receiver sees faces away from `wi` (geometric normal), or
+/// the ray from `p` toward `wi` hits another triangle farther than the offset (`1e-9 ext`)
+/// along it. Exact ray casting in f64 against every triangle (the geometric truth the
+/// kernel's shadow-map rule approximates, see `shaders/shade.wgsl`).
+pub fn shadowed(view: &TransmitterView, tri: usize, p: V3) -> bool {
+    let (s, c) = view.beta.sin_cos();
+    // transmitter frame: wi = +z, wo = (-sin beta, 0, cos beta)
+    let t = &view.tris[tri];
+    let e1 = [0, 1, 2].map(|d| t[1][d] - t[0][d]);
+    let e2 = [0, 1, 2].map(|d| t[2][d] - t[0][d]);
+    let ng = cross(e1, e2);
+    let toward_rx = -s * ng[0] + c * ng[2];
+    if ng[2] * toward_rx.signum() <= 0.0 {
+        return true;
+    }
+    let q = [c * p[0] - s * p[2], p[1], s * p[0] + c * p[2]];
+    for (u, (t, b)) in view.tris.iter().zip(&view.boxes).enumerate() {
+        if u == tri || q[0] < b[0] || q[0] > b[1] || q[1] < b[2] || q[1] > b[3] {
+            continue;
+        }
+        let den =
+            (t[1][0] - t[0][0]) * (t[2][1] - t[0][1]) - (t[1][1] - t[0][1]) * (t[2][0] - t[0][0]);
+        if den == 0.0 {
+            continue;
+        }
+        let (dx, dy) = (q[0] - t[0][0], q[1] - t[0][1]);
+        let l1 = (dx * (t[2][1] - t[0][1]) - dy * (t[2][0] - t[0][0])) / den;
+        let l2 = ((t[1][0] - t[0][0]) * dy - (t[1][1] - t[0][1]) * dx) / den;
+        let l0 = 1.0 - l1 - l2;
+        if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+            continue;
+        }
+        let z = l0 * t[0][2] + l1 * t[1][2] + l2 * t[2][2];
+        if z > q[2] + view.offset {
+            return true;
+        }
+    }
+    false
 }
 
 /// The whole renderer on the CPU in f64 (twin of `gpu::render`, without supersampling
@@ -200,6 +287,8 @@ pub fn render_cpu(
         .par_iter()
         .map(|rot| {
             let ids = visibility(mesh, rot, w, lay.ext);
+            let beta = sensor.bistatic_angle;
+            let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
             let mut img = vec![0.0f32; w * w * ch];
             let mut rng = vec![f32::NAN; w * w];
             let mut prof = vec![0.0f64; nb * ch];
@@ -210,18 +299,18 @@ pub fn render_cpu(
                     continue;
                 }
                 let (row, col) = (k / w, k % w);
-                let Some(s) = shade_pixel(
-                    mesh,
-                    rot,
-                    id as usize - 1,
-                    row,
-                    col,
-                    &lay,
-                    sensor.bistatic_angle,
-                    brdf,
-                ) else {
+                let Some(mut s) =
+                    shade_pixel(mesh, rot, id as usize - 1, row, col, &lay, beta, brdf)
+                else {
                     continue;
                 };
+                // cast shadow: the pixel stays covered (range reported) but returns nothing
+                if let Some(tx) = &tx {
+                    let lit = s.mueller.iter().flatten().any(|&v| v != 0.0);
+                    if lit && shadowed(tx, id as usize - 1, s.point) {
+                        s.mueller = [[0.0; 4]; 4];
+                    }
+                }
                 rng[k] = s.range as f32;
                 let vals: Vec<f64> = match sensor.polarization {
                     None => (0..16).map(|e| s.mueller[e / 4][e % 4]).collect(),
