@@ -116,9 +116,10 @@ ANGLES = np.radians([0.0, 30.0, 60.0, 80.0, 89.0])
 )
 def test_white_furnace_with_double(kwargs: dict) -> None:
     """single + double + multiple = 1 (F = 1): the multiple term carries what the two
-    explicit orders do not. Tolerance 1e-4 to 89 deg (measured below 1.3e-4 at 89 deg and
-    4e-4 at 89.9 deg, where the double-bounce quadrature is least accurate; see
-    docs/double-bounce.md)."""
+    explicit orders do not. Tolerance 1e-4 to 80 deg and 3e-4 at 89 deg (measured below
+    1e-5 to 80 deg and 5e-5 at 89 and 89.9 deg over these materials; before the escape and
+    albedo integrals got phi panels at phi_v +- 90 deg, 1.3e-4 at 89 deg and 4e-4 at 89.9
+    deg; see docs/double-bounce.md)."""
     mat = pprender.white_furnace(terms=("single", "double", "multiple"), **kwargs)
     w = np.stack([sph(t) for t in ANGLES])
     a = pprender.albedo(mat, w, order=128)

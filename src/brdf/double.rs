@@ -492,6 +492,28 @@ fn double_marks(wi: V3, wo: V3, phi0: f64, correlated: bool) -> Vec<Mark> {
     marks
 }
 
+/// The special azimuths of an integrand over `h` whose only cuts are `v.h = 0` and
+/// `reflect(v, h)` crossing the horizon (the escape and albedo integrals): `phi_v` and
+/// `phi_v + 180 deg` (panel ends), and `phi_v +- 90 deg`, where the cut `v.h = 0` meets
+/// the horizon (soft, graded on `|cot theta_v|` near grazing, as in [`double_marks`]).
+fn cut_marks(v: V3) -> Vec<Mark> {
+    let p = v[1].atan2(v[0]);
+    let s_v = (v[0] * v[0] + v[1] * v[1]).sqrt();
+    let mut marks = vec![Mark::plain(p), Mark::plain(p + PI)];
+    if s_v > 1e-12 {
+        let eps = v[2].abs() / s_v;
+        let grade = if eps < 0.25 { eps } else { 0.0 };
+        for sgn in [-1.0, 1.0] {
+            marks.push(Mark {
+                phi: p + sgn * 0.5 * PI,
+                grade,
+                soft: true,
+            });
+        }
+    }
+    marks
+}
+
 /// The double-bounce Mueller BRDF (1/sr, no cosine), with the coherent-backscatter
 /// enhancement when `cbe` is true, by an `order x order` quadrature over `h1` split where
 /// `d` crosses the horizon, where `h2` would (d_z = wo_z) and where `wi.h1 = 0`.
@@ -598,14 +620,7 @@ pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -
         };
         total += wgt * vh * p * fr;
     };
-    let p = v[1].atan2(v[0]);
-    integrate_h(
-        mat,
-        order,
-        &[Mark::plain(p), Mark::plain(p + PI)],
-        &breaks,
-        &mut body,
-    );
+    integrate_h(mat, order, &cut_marks(v), &breaks, &mut body);
     total
 }
 
@@ -641,14 +656,7 @@ pub fn double_albedo(
         };
         total += wgt * wh * w * s_of(neg(d)) * fr;
     };
-    let p = wi[1].atan2(wi[0]);
-    integrate_h(
-        mat,
-        order,
-        &[Mark::plain(p), Mark::plain(p + PI)],
-        &breaks,
-        &mut body,
-    );
+    integrate_h(mat, order, &cut_marks(wi), &breaks, &mut body);
     total
 }
 
