@@ -112,11 +112,11 @@ impl MaterialSpec {
         }
     }
 
-    /// Defaults for the double-bounce parameters. `DOUBLE_ORDER`: the order at which the
-    /// quadrature of `double::eval_double` stays within 1e-4 of the term's M00 against
-    /// order 384 (max over the significant pairs of `python -m pprender.bench_double`,
-    /// measured 1.3e-5 there and on two more seeds' pair sets; order 128 reaches 1.7e-4 on
-    /// one near-grazing GGX pair of another seed; docs/double-bounce-benchmark.md).
+    /// Defaults for the double-bounce parameters. `DOUBLE_ORDER`: the quadrature of
+    /// `double::eval_double` stays within 1e-4 of the term's M00 against order 384 (max
+    /// over the significant pairs of `python -m pprender.bench_double`: 1.3e-5, and at most
+    /// 1.5e-5 on its pair construction with two other seeds, where order 128 reaches 1.7e-4
+    /// on a near-grazing GGX pair; docs/double-bounce.md section 3).
     pub const DOUBLE_ORDER: usize = 160;
     pub const WAVELENGTH: f64 = 1064e-9;
     pub const CORRELATION_LENGTH: f64 = 10e-6;
