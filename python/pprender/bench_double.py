@@ -52,7 +52,7 @@ from pprender import _core
 from pprender.bench import cpu_model, emit_report, load_average, threads_available, timed, uniform_hemisphere
 
 SEED = 2024
-ORDERS = (16, 24, 32, 48, 64, 96, 128, 192)
+ORDERS = (16, 24, 32, 48, 64, 96, 128, 160, 192)
 REF_ORDER = 384
 SIGNIFICANT = 1e-3  # M00_double >= SIGNIFICANT * M00_total
 ERROR_TARGET = 1e-4
