@@ -587,6 +587,48 @@ fn part_reference(
     }
 }
 
+/// Nodes where the pair `(wi, wo)` lies strictly below the horizon (a prefix of every psi
+/// row, large theta, when `beta > 0`) hold no BRDF; they are only ever read as the
+/// neighbours of cells at the cut, which the renderer does evaluate (pixels next to the
+/// terminator). Storing the floor there pulled those cells' `ln M00` down by up to ~200
+/// (a Lambertian sphere at beta = 60 deg lost 0.5% of its cross-section); they now repeat
+/// the row's first node above the cut (constant extrapolation, so the interpolation across
+/// the cut stays within the valid values' range).
+fn extend_below_horizon(
+    mut nodes: Vec<[f64; 16]>,
+    beta: f64,
+    n_z: usize,
+    n_psi: usize,
+    scale: f64,
+) -> Vec<[f64; 16]> {
+    if beta <= 0.0 {
+        return nodes;
+    }
+    let nz1 = n_z + 1;
+    for j in 0..=n_psi {
+        let psi = if n_psi == 0 {
+            0.0
+        } else {
+            j as f64 * PI / n_psi as f64
+        };
+        let below = |i: usize| {
+            let theta = ZTable::theta_of_z(scale, i as f64 / n_z as f64);
+            let (wi, wo) = table_dirs(beta, theta, psi);
+            wi[2] < 0.0 || wo[2] < 0.0
+        };
+        // z = 0 is theta = 90 deg: the below-horizon nodes are i = 0 .. cut
+        let Some(cut) = (0..nz1).find(|&i| !below(i)) else {
+            continue;
+        };
+        let row = j * nz1;
+        let fill = nodes[row + cut];
+        for node in &mut nodes[row..row + cut] {
+            *node = fill;
+        }
+    }
+    nodes
+}
+
 /// The 16 stored numbers of a node.
 fn encode(m: &Mat4) -> [f64; 16] {
     let mut out = [0.0; 16];
@@ -661,6 +703,7 @@ impl BrdfTable {
                     encode(&part_reference(&m, g.kind, frame, beta, theta, psi))
                 })
                 .collect();
+            let nodes = extend_below_horizon(nodes, beta, n_z, n_psi, scale);
             parts.push(TablePart {
                 scale,
                 n_z,
