@@ -340,7 +340,10 @@ fn phi_rule(n: usize, marks: &[Mark]) -> Vec<(f64, f64)> {
             ));
         }
     }
-    let graded_n = 12;
+    // nodes per graded panel: 12 from order 64 on (the defaults: DOUBLE_ORDER,
+    // DOUBLE_TABLE_ORDER); fewer at the low orders of the renderer's and the monostatic
+    // tables, whose build time they otherwise dominate (dozens of graded panels near grazing)
+    let graded_n = if n >= 64 { 12 } else { (n / 8).max(4) };
     let n_graded = panels.iter().filter(|p| !p.4).count();
     let main_len: f64 = panels.iter().filter(|p| p.4).map(|p| p.1 - p.0).sum();
     let n_main = panels.len() - n_graded;
