@@ -421,6 +421,17 @@ pub struct PartRef<'a> {
     pub data: &'a [f64],
 }
 
+impl<'a> From<&'a crate::brdf::table::TablePart> for PartRef<'a> {
+    fn from(p: &'a crate::brdf::table::TablePart) -> Self {
+        PartRef {
+            scale: p.scale,
+            n_z: p.n_z,
+            n_psi: p.n_psi,
+            data: &p.data,
+        }
+    }
+}
+
 impl GpuTables {
     /// Pack up to [`MAX_PARTS`] parts per material tabulated for the bistatic angle `beta`.
     pub fn pack(materials: &[Vec<PartRef<'_>>], beta: f64) -> Result<Self> {
@@ -836,84 +847,11 @@ fn render_chunks(
         .profile
         .then(|| mk("profile read", prof_size, read_usage));
     let tot_read = mk("total read", tot_size, read_usage);
-    let tex_desc = |format, usage| wgpu::TextureDescriptor {
-        label: Some("visibility target"),
-        size: wgpu::Extent3d {
-            width: w as u32,
-            height: w as u32,
-            depth_or_array_layers: c as u32,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format,
-        usage,
-        view_formats: &[],
-    };
-    let ids = dev.create_texture(&tex_desc(
-        wgpu::TextureFormat::R32Uint,
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-    ));
-    let depth = dev.create_texture(&tex_desc(
-        wgpu::TextureFormat::Depth32Float,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
-    ));
-    let ids_array_view = ids.create_view(&wgpu::TextureViewDescriptor {
-        dimension: Some(wgpu::TextureViewDimension::D2Array),
-        ..Default::default()
-    });
-    let layer_view = |t: &wgpu::Texture, l: u32| {
-        t.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2),
-            base_array_layer: l,
-            array_layer_count: Some(1),
-            ..Default::default()
-        })
-    };
-    let id_views: Vec<_> = (0..c as u32).map(|l| layer_view(&ids, l)).collect();
-    let depth_views: Vec<_> = (0..c as u32).map(|l| layer_view(&depth, l)).collect();
+    let rcv = IdTarget::new(dev, "visibility target", w as u32, c as u32);
     // bistatic: the triangle ids seen from the transmitter (same square, tx_width texels)
-    let txw = params.tx_width;
-    let tx_desc = |format, usage| wgpu::TextureDescriptor {
-        label: Some("transmitter target"),
-        size: wgpu::Extent3d {
-            width: txw,
-            height: txw,
-            depth_or_array_layers: c as u32,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format,
-        usage,
-        view_formats: &[],
-    };
-    let tx_ids = key.shadows.then(|| {
-        dev.create_texture(&tx_desc(
-            wgpu::TextureFormat::R32Uint,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        ))
-    });
-    let tx_depth = key.shadows.then(|| {
-        dev.create_texture(&tx_desc(
-            wgpu::TextureFormat::Depth32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        ))
-    });
-    let tx_depth_views: Vec<_> = match &tx_depth {
-        Some(t) => (0..c as u32).map(|l| layer_view(t, l)).collect(),
-        None => vec![],
-    };
-    let tx_array_view = tx_ids.as_ref().map(|t| {
-        t.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            ..Default::default()
-        })
-    });
-    let tx_views: Vec<_> = match &tx_ids {
-        Some(t) => (0..c as u32).map(|l| layer_view(t, l)).collect(),
-        None => vec![],
-    };
+    let tx = key
+        .shadows
+        .then(|| IdTarget::new(dev, "transmitter target", params.tx_width, c as u32));
 
     let mut image = outputs
         .image
@@ -974,7 +912,7 @@ fn render_chunks(
             entries: &[
                 wgpu::BindGroupEntry {
                     binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&ids_array_view),
+                    resource: wgpu::BindingResource::TextureView(&rcv.array_view),
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
@@ -1011,7 +949,7 @@ fn render_chunks(
                 wgpu::BindGroupEntry {
                     binding: 9,
                     resource: wgpu::BindingResource::TextureView(
-                        tx_array_view.as_ref().unwrap_or(&ids_array_view),
+                        tx.as_ref().map_or(&rcv.array_view, |t| &t.array_view),
                     ),
                 },
             ],
@@ -1022,9 +960,9 @@ fn render_chunks(
         }
         enc.clear_buffer(&tot_buf, 0, None);
         // the receiver's view, then (bistatic) the transmitter's
-        let mut views_and_groups = vec![(&id_views, &depth_views, &vis_bg)];
-        if let Some(bg) = &tx_bg {
-            views_and_groups.push((&tx_views, &tx_depth_views, bg));
+        let mut views_and_groups = vec![(&rcv.id_views, &rcv.depth_views, &vis_bg)];
+        if let (Some(bg), Some(t)) = (&tx_bg, &tx) {
+            views_and_groups.push((&t.id_views, &t.depth_views, bg));
         }
         for (views, dviews, bg) in views_and_groups {
             for l in 0..m {
@@ -1178,6 +1116,64 @@ fn render_chunks(
         pixel_size: lay.pix * ss as f64,
         extent: lay.ext,
     })
+}
+
+/// A raster target of triangle ids (R32Uint, read by the shade kernel) with its depth
+/// buffer, `layers` attitudes deep: per-layer views for the raster passes, an array view
+/// for the kernel.
+struct IdTarget {
+    array_view: wgpu::TextureView,
+    id_views: Vec<wgpu::TextureView>,
+    depth_views: Vec<wgpu::TextureView>,
+}
+
+impl IdTarget {
+    fn new(dev: &wgpu::Device, label: &str, side: u32, layers: u32) -> Self {
+        let texture = |format, usage| {
+            dev.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: side,
+                    height: side,
+                    depth_or_array_layers: layers,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let ids = texture(
+            wgpu::TextureFormat::R32Uint,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let depth = texture(
+            wgpu::TextureFormat::Depth32Float,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        let layer_views = |t: &wgpu::Texture| -> Vec<wgpu::TextureView> {
+            (0..layers)
+                .map(|l| {
+                    t.create_view(&wgpu::TextureViewDescriptor {
+                        dimension: Some(wgpu::TextureViewDimension::D2),
+                        base_array_layer: l,
+                        array_layer_count: Some(1),
+                        ..Default::default()
+                    })
+                })
+                .collect()
+        };
+        IdTarget {
+            array_view: ids.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            }),
+            id_views: layer_views(&ids),
+            depth_views: layer_views(&depth),
+        }
+    }
 }
 
 /// What the shade kernel computes and what is read back, from the request: a sampled
@@ -1485,16 +1481,7 @@ mod twin_tests {
                 ..Default::default()
             };
             let table = BrdfTable::build(&mat, beta, &opts).unwrap();
-            let parts: Vec<PartRef<'_>> = table
-                .parts
-                .iter()
-                .map(|p| PartRef {
-                    scale: p.scale,
-                    n_z: p.n_z,
-                    n_psi: p.n_psi,
-                    data: &p.data,
-                })
-                .collect();
+            let parts: Vec<PartRef<'_>> = table.parts.iter().map(PartRef::from).collect();
             let tables = GpuTables::pack(&[parts], beta).unwrap();
             let mut sensor = super::tests::lambert_sensor(64);
             sensor.bistatic_angle = beta;

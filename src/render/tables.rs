@@ -54,17 +54,7 @@ impl SceneTables {
             .collect::<Result<_>>()?;
         let refs: Vec<Vec<PartRef<'_>>> = tables
             .iter()
-            .map(|t| {
-                t.parts
-                    .iter()
-                    .map(|p| PartRef {
-                        scale: p.scale,
-                        n_z: p.n_z,
-                        n_psi: p.n_psi,
-                        data: &p.data,
-                    })
-                    .collect()
-            })
+            .map(|t| t.parts.iter().map(PartRef::from).collect())
             .collect();
         let g = Arc::new(GpuTables::pack(&refs, beta)?);
         let t = Arc::new(tables);
