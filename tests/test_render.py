@@ -23,6 +23,7 @@ import pytest
 from scipy.special import ndtr
 
 import pprender
+import raycast
 from pprender import models
 
 C = pprender.SPEED_OF_LIGHT
@@ -199,19 +200,11 @@ def test_coverage_and_range_match_trimesh_ray_casting(units):
     sensor = pprender.Lidar(resolution=96)
     res = pprender.render(scene, sensor, q, outputs=("range",))
     rots = pprender._core.quaternions_to_rotations(q)
-    ext = res.extent
     n = 96
-    pix = 2 * ext / n
-    x = -ext + (np.arange(n) + 0.5) * pix
-    y = ext - (np.arange(n) + 0.5) * pix
-    X, Y = np.meshgrid(x, y)
-    origins = np.stack([X.ravel(), Y.ravel(), np.full(X.size, 2 * ext)], axis=1)
-    dirs = np.tile([0.0, 0.0, -1.0], (X.size, 1))
+    origins, dirs = raycast.pixel_rays(res.extent, n)
     for i, R in enumerate(rots):
-        m = mesh.copy()
-        m.apply_transform(np.block([[R, np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))
-        loc, idx_ray, _ = m.ray.intersects_location(origins, dirs, multiple_hits=False)
-        want = np.full(X.size, np.nan)
+        loc, idx_ray, _ = raycast.rotated(mesh, R).ray.intersects_location(origins, dirs, multiple_hits=False)
+        want = np.full(n * n, np.nan)
         want[idx_ray] = -loc[:, 2]
         want = want.reshape(n, n)
         got = res.range[i]

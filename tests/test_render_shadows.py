@@ -26,6 +26,7 @@ import pytest
 import trimesh
 
 import pprender
+import raycast
 from pprender import models
 
 LAMBERT = pprender.Material("beckmann", alpha=0.3, eta=1.0 + 0j, terms=["diffuse"],
@@ -52,26 +53,18 @@ def reference_lit(mesh: trimesh.Trimesh, rot: np.ndarray, beta: float, n: int, e
     """Per pixel centre (n x n, conventions of src/render/mod.rs): the range of the visible
     point (NaN if none) and whether it is lit (facing the transmitter and the ray from it
     toward the transmitter, offset 1e-5 ext along the normal, hits nothing)."""
-    m = mesh.copy()
-    t = np.eye(4)
-    t[:3, :3] = rot
-    m.apply_transform(t)
-    pix = 2 * ext / n
-    x = -ext + (np.arange(n) + 0.5) * pix
-    y = ext - (np.arange(n) + 0.5) * pix
-    X, Y = np.meshgrid(x, y)
-    origins = np.stack([X.ravel(), Y.ravel(), np.full(X.size, 2 * ext)], axis=1)
-    dirs = np.tile([0.0, 0.0, -1.0], (X.size, 1))
+    m = raycast.rotated(mesh, rot)
+    origins, dirs = raycast.pixel_rays(ext, n)
     loc, idx_ray, idx_tri = m.ray.intersects_location(origins, dirs, multiple_hits=False)
     wi = np.array([math.sin(beta), 0.0, math.cos(beta)])
     wo = np.array([0.0, 0.0, 1.0])
-    rng = np.full(X.size, np.nan)
+    rng = np.full(n * n, np.nan)
     rng[idx_ray] = -loc @ (wi + wo) / 2
     nrm = m.face_normals[idx_tri]
     nrm *= np.where(nrm[:, 2] < 0, -1.0, 1.0)[:, None]  # the side the receiver sees
     facing = nrm @ wi > 0
     blocked = m.ray.intersects_any(loc + 1e-5 * ext * nrm, np.tile(wi, (len(loc), 1)))
-    lit = np.zeros(X.size, bool)
+    lit = np.zeros(n * n, bool)
     lit[idx_ray] = facing & ~blocked
     return rng.reshape(n, n), lit.reshape(n, n)
 
