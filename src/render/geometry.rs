@@ -13,6 +13,56 @@ pub struct Mesh {
     pub face_material: Vec<u32>,
     /// Radius of the bounding sphere about the body origin.
     pub radius: f64,
+    /// Whether every connected component is a closed surface wound consistently with
+    /// outward normals ([`is_closed_outward`]): the nearest surface along any outside ray
+    /// is then a front face, and the raster passes cull back faces.
+    pub closed: bool,
+}
+
+/// Whether a triangle mesh is a union of closed, outward-wound surfaces: every directed
+/// edge `(a, b)` of a face occurs exactly once and its reverse `(b, a)` exactly once, and
+/// every connected component (faces joined through shared vertices) encloses a positive
+/// signed volume. Meshes with duplicated (unwelded) vertices, open parts or inconsistent
+/// winding return false (and are rendered without culling).
+pub fn is_closed_outward(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> bool {
+    use std::collections::HashMap;
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(3 * faces.len());
+    for f in faces {
+        for k in 0..3 {
+            let e = (f[k], f[(k + 1) % 3]);
+            let c = edges.entry(e).or_insert(0);
+            *c += 1;
+            if *c > 1 {
+                return false;
+            }
+        }
+    }
+    if edges.keys().any(|&(a, b)| !edges.contains_key(&(b, a))) {
+        return false;
+    }
+    // components by union-find over vertices
+    let mut parent: Vec<u32> = (0..vertices.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for f in faces {
+        let r0 = find(&mut parent, f[0]);
+        for &k in &f[1..] {
+            let r = find(&mut parent, k);
+            parent[r as usize] = r0;
+        }
+    }
+    let mut volume: HashMap<u32, f64> = HashMap::new();
+    for f in faces {
+        let [a, b, c] = f.map(|k| vertices[k as usize]);
+        let v = crate::optics::frames::dot(a, crate::optics::frames::cross(b, c));
+        *volume.entry(find(&mut parent, f[0])).or_insert(0.0) += v / 6.0;
+    }
+    volume.values().all(|&v| v > 0.0)
 }
 
 /// Relative area (to the squared bounding radius) below which a triangle is degenerate.
@@ -117,12 +167,14 @@ impl Mesh {
                 ));
             }
         }
+        let closed = is_closed_outward(&vertices, &faces);
         Ok(Mesh {
             vertices,
             faces,
             normals,
             face_material,
             radius,
+            closed,
         })
     }
 
@@ -289,5 +341,69 @@ mod tests {
         let mut bad = v.clone();
         bad[1][0] = f64::NAN;
         assert!(Mesh::new(bad, vec![[0, 1, 2]], None, vec![0], 1).is_err());
+    }
+
+    /// A unit cube centred at `c`, outward-wound (counter-clockwise seen from outside).
+    fn cube(c: [f64; 3], first: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+        let v = (0..8)
+            .map(|k| [0, 1, 2].map(|a| c[a] + if (k >> a) & 1 == 1 { 0.5 } else { -0.5 }))
+            .collect();
+        // quads (outward, counter-clockwise): -x, +x, -y, +y, -z, +z
+        let quads = [
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+        ];
+        let f = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .map(|t: [u32; 3]| t.map(|k| k + first))
+            .collect();
+        (v, f)
+    }
+
+    #[test]
+    fn closed_outward_meshes_are_recognized() {
+        let (v, f) = cube([0.0; 3], 0);
+        // the winding is outward: every face normal points away from the centre
+        for t in &f {
+            let [a, b, c] = t.map(|k| v[k as usize]);
+            let n = crate::optics::frames::cross(
+                [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+                [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+            );
+            assert!(crate::optics::frames::dot(n, a) > 0.0);
+        }
+        assert!(is_closed_outward(&v, &f));
+        // two bodies, one overlapping the other: still closed
+        let (v2, f2) = cube([0.7, 0.0, 0.0], 8);
+        let (mut vv, mut ff) = (v.clone(), f.clone());
+        vv.extend(v2);
+        ff.extend(f2.clone());
+        assert!(is_closed_outward(&vv, &ff));
+        // one body turned inside out: its volume is negative
+        let n = ff.len();
+        for t in &mut ff[n - 12..] {
+            t.swap(1, 2);
+        }
+        assert!(!is_closed_outward(&vv, &ff));
+        // a missing face (open), one flipped face (inconsistent), a duplicated face
+        assert!(!is_closed_outward(&v, &f[1..]));
+        let mut g = f.clone();
+        g[3].swap(0, 1);
+        assert!(!is_closed_outward(&v, &g));
+        let mut g = f.clone();
+        g.push(f[0]);
+        assert!(!is_closed_outward(&v, &g));
+        // unwelded: the same cube with every face on its own vertices
+        let vs: Vec<[f64; 3]> = f.iter().flat_map(|t| t.map(|k| v[k as usize])).collect();
+        let fs: Vec<[u32; 3]> = (0..f.len() as u32)
+            .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+            .collect();
+        assert!(!is_closed_outward(&vs, &fs));
+        assert!(Mesh::new(v, f, None, vec![0; 12], 1).unwrap().closed);
     }
 }

@@ -65,7 +65,7 @@ pub struct Gpu {
     pub info: DeviceInfo,
     limits: wgpu::Limits,
     vis_layout: wgpu::BindGroupLayout,
-    vis_pipeline: wgpu::RenderPipeline,
+    vis_pipeline: [wgpu::RenderPipeline; 2],
     shade_layout: wgpu::BindGroupLayout,
     shade_pipeline_layout: wgpu::PipelineLayout,
     shade_module: wgpu::ShaderModule,
@@ -208,40 +208,45 @@ impl Gpu {
             bind_group_layouts: &[Some(&vis_layout)],
             immediate_size: 0,
         });
-        let vis_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("visibility"),
-            layout: Some(&vis_pl),
-            vertex: wgpu::VertexState {
-                module: &vis_module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: wgpu::TextureFormat::Depth32Float,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &vis_module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::R32Uint,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
+        // [no culling, back faces culled (closed, outward-wound meshes: Mesh::closed)];
+        // the view maps the body's outward normals facing the viewer to counter-clockwise
+        let vis_pipeline = [None, Some(wgpu::Face::Back)].map(|cull_mode| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("visibility"),
+                layout: Some(&vis_pl),
+                vertex: wgpu::VertexState {
+                    module: &vis_module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode,
+                    front_face: wgpu::FrontFace::Ccw,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: wgpu::TextureFormat::Depth32Float,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &vis_module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: wgpu::TextureFormat::R32Uint,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
         });
         let cs = wgpu::ShaderStages::COMPUTE;
         let shade_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -733,8 +738,19 @@ pub fn render(
     let scope_v = dev.push_error_scope(wgpu::ErrorFilter::Validation);
     let scope_m = dev.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let result = render_chunks(
-        gpu, &geometry, tables, &params, rotations, outputs, kern, channels, chunk, fix_scale,
-        &lay, sensor,
+        gpu,
+        &geometry,
+        tables,
+        &params,
+        rotations,
+        outputs,
+        kern,
+        channels,
+        chunk,
+        fix_scale,
+        &lay,
+        sensor,
+        mesh.closed,
     );
     let oom = pollster::block_on(scope_m.pop());
     let val = pollster::block_on(scope_v.pop());
@@ -765,6 +781,7 @@ fn render_chunks(
     fix_scale: f64,
     lay: &Layout,
     sensor: &SensorSetup,
+    mesh_closed: bool,
 ) -> Result<Rendered> {
     let dev = &gpu.device;
     let w = lay.width;
@@ -777,7 +794,10 @@ fn render_chunks(
         image: kern.image,
         range: kern.range,
         profile: kern.profile,
-        total: true,
+        // With the profile on the device the total is its sum, taken exactly on the host
+        // from the same fixed-point words (the bins cover every pixel's footprint and pulse
+        // support, see Layout): the kernel's workgroup reduction is then compiled out.
+        total: !kern.profile,
         footprint: kern.footprint,
         shadows: sensor.bistatic_angle > 0.0,
     };
@@ -989,7 +1009,7 @@ fn render_chunks(
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
-                pass.set_pipeline(&gpu.vis_pipeline);
+                pass.set_pipeline(&gpu.vis_pipeline[mesh_closed as usize]);
                 pass.set_bind_group(0, bg, &[]);
                 let l = l as u32;
                 pass.draw(0..(3 * params.n_tri), l..l + 1);
@@ -1019,7 +1039,9 @@ fn render_chunks(
         if let Some(b) = &prof_read {
             copy(&mut enc, &prof_buf, b, prof_bytes);
         }
-        copy(&mut enc, &tot_buf, &tot_read, tot_bytes);
+        if key.total {
+            copy(&mut enc, &tot_buf, &tot_read, tot_bytes);
+        }
         gpu.queue.submit([enc.finish()]);
 
         let read = |b: &wgpu::Buffer, bytes: u64| -> Result<Vec<u8>> {
@@ -1041,10 +1063,28 @@ fn render_chunks(
                 .map(|p| ((((p[1] as u64) << 32) | p[0] as u64) as i64) as f64 / fix_scale)
                 .collect()
         };
-        let t = fixed(&read(&tot_read, tot_bytes)?);
-        total[start * channels..(start + m) * channels].copy_from_slice(&t);
+        if key.total {
+            let t = fixed(&read(&tot_read, tot_bytes)?);
+            total[start * channels..(start + m) * channels].copy_from_slice(&t);
+        }
         if let (Some(b), Some(out)) = (&prof_read, profile.as_mut()) {
-            let p = fixed(&read(b, prof_bytes)?);
+            let bytes = read(b, prof_bytes)?;
+            if !key.total {
+                // exact: sums of the fixed-point integers (|sum| < 2^61 by the scale)
+                let words: &[u32] = bytemuck::cast_slice(&bytes);
+                for l in 0..m {
+                    for ch in 0..channels {
+                        let s: i64 = (0..nb)
+                            .map(|k| {
+                                let i = 2 * ((l * nb + k) * channels + ch);
+                                (((words[i + 1] as u64) << 32) | words[i] as u64) as i64
+                            })
+                            .sum();
+                        total[(start + l) * channels + ch] = s as f64 / fix_scale;
+                    }
+                }
+            }
+            let p = fixed(&bytes);
             out[start * nb * channels..(start + m) * nb * channels].copy_from_slice(&p);
         }
         let raw_img = img_read.as_ref().map(|b| read(b, img_bytes)).transpose()?;
