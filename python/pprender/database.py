@@ -64,7 +64,7 @@ import shutil
 import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
@@ -77,6 +77,7 @@ __all__ = [
     "create_database",
     "list_chunks",
     "open_database",
+    "pad_profile",
     "write_chunk",
 ]
 
@@ -316,8 +317,8 @@ class _Store:
         self.path = Path(path)
         if not (self.path / "zarr.json").is_file():
             raise Error(f"invalid path {str(path)!r}: no Zarr store there (create it with build_database)")
-        self.group = zarr.open_group(str(self.path), mode="r+")
-        attrs = dict(self.group.attrs)
+        self.group: Any = zarr.open_group(str(self.path), mode="r+")
+        attrs: dict[str, Any] = dict(self.group.attrs)
         if attrs.get("format") != FORMAT:
             raise Error(f"invalid path {str(path)!r}: not a pprender database (format {attrs.get('format')!r})")
         self.attrs = attrs
@@ -328,8 +329,8 @@ class _Store:
         grid = attrs["range_grid"]
         self.half_bins = int(grid["half_bins"])
         self.bin_width = float(grid["bin_width"])
-        self.profile = self.group["profile"]
-        self.complete = self.group["complete"]
+        self.profile: Any = cast(Any, self.group["profile"])
+        self.complete: Any = cast(Any, self.group["complete"])
         self.n_attitudes = int(self.profile.shape[2])
         self.n_chunks = int(self.complete.shape[2])
         self._attitudes: np.ndarray | None = None
@@ -387,14 +388,11 @@ class _Store:
         return Chunk(s, m, k, start, stop, bool(self.complete[s, m, k]))
 
 
-def _place(store: _Store, result: Any, n: int, s: int) -> np.ndarray:
-    """The rendered profile ``(n, 2 K_s, ...)`` padded into the common grid ``(n, 2 K, ...)``."""
-    prof = np.asarray(result.profile)
-    edges = np.asarray(result.bin_edges, dtype=np.float64)
-    w, K = store.bin_width, store.half_bins
-    channels = (4, 4) if store.sensor.polarization is None else (4,)
-    if prof.ndim != 2 + len(channels) or prof.shape[0] != n or prof.shape[2:] != channels:
-        raise Error(f"render returned a profile of shape {prof.shape}, expected ({n}, B, {', '.join(map(str, channels))})")
+def _pad(prof: np.ndarray, edges: np.ndarray, w: float, K: int, what: str) -> np.ndarray:
+    """A profile ``(n, 2 K_s, ...)`` on the renderer's bins ``edges`` padded with zeros to
+    the common grid ``(n, 2 K, ...)`` of bin width ``w`` (float64)."""
+    if prof.ndim < 2:
+        raise Error(f"invalid profile for {what}: shape {prof.shape}, expected (N, B, ...)")
     nb = prof.shape[1]
     k_s = int(round(-edges[0] / w)) if len(edges) else -1
     if (
@@ -404,19 +402,59 @@ def _place(store: _Store, result: Any, n: int, s: int) -> np.ndarray:
         or abs((edges[-1] - edges[0]) / nb - w) > 1e-9 * w
     ):
         raise Error(
-            f"render returned bin edges {edges[:1]}..{edges[-1:]} ({len(edges)}) that are not the "
-            f"symmetric grid of bin width {w} m the database was created with"
+            f"invalid bin edges for {what}: {edges[:1]}..{edges[-1:]} ({len(edges)} edges for {nb} bins) "
+            f"are not the renderer's symmetric grid of bin width {w} m"
         )
     if k_s > K:
         raise Error(
-            f"invalid range_window: shape {store.shape_names[s]!r} needs +-{k_s * w} m, the "
-            f"database covers +-{K * w} m; rebuild with a larger range_window (or None)"
+            f"invalid range_window: {what} needs +-{k_s * w} m, the database covers +-{K * w} m; "
+            "rebuild with a larger range_window (or None)"
         )
     if not np.all(np.isfinite(prof)):
-        raise Error(f"render returned non-finite profile values for shape {store.shape_names[s]!r}")
-    out = np.zeros((n, 2 * K) + channels, dtype=store.profile.dtype)
+        raise Error(f"invalid profile for {what}: non-finite values")
+    out = np.zeros((prof.shape[0], 2 * K) + prof.shape[2:], dtype=np.float64)
     out[:, K - k_s : K + k_s] = prof
     return out
+
+
+def _place(store: _Store, result: Any, n: int, s: int) -> np.ndarray:
+    """The rendered chunk padded into the store's grid, in the store's dtype."""
+    prof = np.asarray(result.profile)
+    channels = (4, 4) if store.sensor.polarization is None else (4,)
+    if prof.ndim != 2 + len(channels) or prof.shape[0] != n or prof.shape[2:] != channels:
+        raise Error(f"render returned a profile of shape {prof.shape}, expected ({n}, B, {', '.join(map(str, channels))})")
+    edges = np.asarray(result.bin_edges, dtype=np.float64)
+    out = _pad(prof, edges, store.bin_width, store.half_bins, f"shape {store.shape_names[s]!r}")
+    return out.astype(store.profile.dtype, copy=False)
+
+
+def pad_profile(profile: Any, bin_edges: Any, database: Any) -> np.ndarray:
+    """Put profiles rendered by :func:`pprender.render` onto a database's range grid.
+
+    Parameters
+    ----------
+    profile : array_like
+        (N, B, ...) profiles (m^2 per bin), e.g. ``RenderResult.profile``, rendered with
+        the database's bin width.
+    bin_edges : array_like
+        (B + 1,) their bin edges (m), ``RenderResult.bin_edges``.
+    database : xarray.Dataset or path
+        The database (:func:`open_database`) or its path.
+
+    Returns
+    -------
+    numpy.ndarray
+        (N, 2 K, ...) float64, zero outside the profile's own bins (module docstring).
+    """
+    if isinstance(database, (str, os.PathLike)):
+        database = open_database(database)
+    try:
+        grid = database.attrs["range_grid"]
+        w, K = float(grid["bin_width"]), int(grid["half_bins"])
+    except (AttributeError, KeyError, TypeError):
+        raise Error("invalid database: expected an open pprender database or its path") from None
+    prof = np.asarray(profile, dtype=np.float64)
+    return _pad(prof, np.asarray(bin_edges, dtype=np.float64), w, K, "the profile")
 
 
 # --------------------------------------------------------------------------- public API
@@ -678,7 +716,7 @@ def _write_empty(
         channel_dims, channel_shape = ("stokes",), (4,)
     xr.Dataset(coords=coords).to_zarr(str(tmp), mode="w-", zarr_format=3, consolidated=False)
 
-    g = zarr.open_group(str(tmp), mode="r+")
+    g: Any = zarr.open_group(str(tmp), mode="r+")
     n_s, n_m = len(shape_names), len(material_names)
     g.create_array(
         "profile",
