@@ -346,6 +346,10 @@ def test_changed_parameters_raise_unless_overwrite(db, setup, tmp_path) -> None:
     with pytest.raises(pp.Error, match="only pprender databases"):
         _build(other, small, overwrite=True)
     assert (other / "keep.txt").exists()
+    # an empty directory is used as is
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert _build(empty, small, chunk_attitudes=2).complete.values.all()
 
 
 def test_memory_does_not_grow_with_attitudes(setup, tmp_path) -> None:

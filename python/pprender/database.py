@@ -599,7 +599,7 @@ def _create(
     fingerprint = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
 
     path = Path(path)
-    if path.exists():
+    if path.exists() and not (path.is_dir() and not any(path.iterdir())):  # an empty directory is fine
         existing = _existing_fingerprint(path)
         if not overwrite:
             if existing is None:
@@ -615,7 +615,7 @@ def _create(
                 f"({', '.join(diff) or 'fingerprint'}) is there; pass overwrite=True to replace it "
                 "or choose another path"
             )
-        if existing is None and not (path.is_dir() and not any(path.iterdir())):
+        if existing is None:
             raise Error(
                 f"invalid path {str(path)!r}: overwrite=True replaces only pprender databases, "
                 "and this is something else"
@@ -828,7 +828,7 @@ def build_database(
         Show a tqdm progress bar (one step per chunk).
     overwrite : bool
         Replace an existing database made with other parameters (only a pprender
-        database, or an empty directory, is ever removed).
+        database is ever removed; an empty directory is used as is).
 
     Returns
     -------

@@ -87,8 +87,9 @@ def grid(n: int) -> np.ndarray:
     numpy.ndarray
         (n, 4) unit quaternions ``(w, x, y, z)``, ``w >= 0``. The typical spacing is
         :func:`ball_radius` ``(n)``; :func:`covering_radius` estimates the largest
-        distance from any rotation to the grid (about 1.3x to 1.6x ``ball_radius(n)``
-        measured for n = 100 to 5000).
+        distance from any rotation to the grid (measured 1.55, 1.49 and 1.44 times
+        ``ball_radius(n)`` for n = 100, 1000 and 5000; Haar-random sets of the same sizes:
+        2.0 to 2.4 times).
     """
     n = _count("n", n)
     s = np.arange(n, dtype=np.float64) + 0.5
