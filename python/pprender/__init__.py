@@ -23,9 +23,18 @@ import numpy as np
 from . import _core
 from ._core import BrdfTable, Error, Material, __version__, brdf_table
 from .lidar import SPEED_OF_LIGHT, Lidar, RenderResult, Scene, device_info, render
+from . import classify, database, so3  # noqa: E402  (their heavy imports are lazy)
+from .classify import Classifier
+from .database import build_database, open_database
 
 __all__ = [
     "BrdfTable",
+    "Classifier",
+    "build_database",
+    "classify",
+    "database",
+    "open_database",
+    "so3",
     "Error",
     "Lidar",
     "Material",
