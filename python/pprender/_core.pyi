@@ -251,7 +251,18 @@ class RenderScene:
     def radius(self) -> float: ...
     @property
     def n_faces(self) -> int: ...
-    def prepare(self, bistatic_angle: float) -> float: ...
+    def prepare(
+        self,
+        bistatic_angle: float,
+        *,
+        n_z: int | None = None,
+        n_psi: int | None = None,
+        n_z_lambertian: int | None = None,
+        n_psi_lambertian: int | None = None,
+        n_z_double: int | None = None,
+        n_psi_double: int | None = None,
+        double_order: int | None = None,
+    ) -> float: ...
     def render(
         self,
         rotations: npt.NDArray[np.float64],
@@ -268,6 +279,13 @@ class RenderScene:
         device: str,
         pulse_samples: Sequence[float] | None = None,
         pulse_spacing: float = 0.0,
+        n_z: int | None = None,
+        n_psi: int | None = None,
+        n_z_lambertian: int | None = None,
+        n_psi_lambertian: int | None = None,
+        n_z_double: int | None = None,
+        n_psi_double: int | None = None,
+        double_order: int | None = None,
     ) -> dict[str, Any]: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...

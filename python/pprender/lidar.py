@@ -193,6 +193,15 @@ class Lidar:
     1e-3 relative error of cross-sections for generic orientations (edges aligned with the
     pixel grid alias more; docs/render-accuracy.md).
     ``supersampling``: sub-pixels per pixel side for visibility and the profile.
+    ``quality``: the speed/accuracy dial (:data:`QUALITY`; docs/tradeoff.md measures each):
+    ``"fast"`` (coarse BRDF tables, pixels half the range FWHM across), ``"balanced"``
+    (the default grids and resolution), ``"accurate"`` (fine tables, double bounce at
+    order 96, pixels an eighth of the range FWHM) or ``"reference"`` (the exact f64 CPU
+    renderer: every pixel's BRDF evaluated by the core, no tables; slow). ``table``:
+    individual overrides of the preset's BRDF table grid, a mapping with any of ``n_z``,
+    ``n_psi`` (single term), ``n_z_lambertian``, ``n_psi_lambertian`` (multiple + diffuse),
+    ``n_z_double``, ``n_psi_double``, ``double_order`` (:func:`pprender.brdf_table`).
+    ``resolution`` and ``supersampling`` given explicitly override the preset's.
     ``bistatic_angle`` (rad) in [0, pi/2). ``polarization``: transmitted Stokes vector
     (4,) in the transmit basis, or None for full Mueller output. ``wavelength`` (m) must
     match the materials' wavelength (their refractive indices are for one wavelength).
@@ -207,8 +216,24 @@ class Lidar:
     supersampling: int = 1
     pulse_samples: Sequence[float] | None = None
     pulse_sample_spacing: float | None = None
+    quality: str = "balanced"
+    table: Any = None
 
     def __post_init__(self) -> None:
+        if self.quality not in QUALITY:
+            raise Error(f"invalid quality = {self.quality!r}: one of {tuple(QUALITY)}")
+        if self.table is not None:
+            try:
+                items = dict(self.table).items()
+            except (TypeError, ValueError):
+                raise Error(f"invalid table = {self.table!r}: a mapping of grid keywords to integers") from None
+            bad = [k for k, _ in items if k not in _TABLE_KEYS]
+            if bad:
+                raise Error(f"invalid table keys {bad}: choose from {_TABLE_KEYS}")
+            for k, v in items:
+                if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not 2 <= v <= 65536:
+                    raise Error(f"invalid table[{k!r}] = {v!r}: an integer in [2, 65536]")
+            object.__setattr__(self, "table", tuple(sorted((k, int(v)) for k, v in items)))
         for name in ("wavelength", "pulse_fwhm"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -298,9 +323,21 @@ class Lidar:
         return self.bin_width if self.bin_width is not None else self.range_fwhm / 4.0
 
     def effective_resolution(self, radius: float) -> int:
+        """Image side in pixels: ``resolution``, or the quality preset's default for an
+        object of bounding ``radius`` (m): a pixel ``range_fwhm / pixels_per_fwhm`` across,
+        clamped to [64, 1024] (``"fast"``: [32, 1024])."""
         if self.resolution is not None:
             return int(self.resolution)
-        return int(min(1024, max(64, math.ceil(2.0 * radius / (self.range_fwhm / 4.0)))))
+        q = QUALITY[self.quality]
+        n = math.ceil(2.0 * radius / (self.range_fwhm / q["pixels_per_fwhm"]))
+        return int(min(1024, max(q["min_resolution"], n)))
+
+    def table_options(self) -> dict[str, int]:
+        """The BRDF table grid the renderer uses: the preset's, then ``table``'s overrides
+        (keys absent: the defaults of :func:`pprender.brdf_table`)."""
+        d = dict(QUALITY[self.quality]["table"])
+        d.update(dict(self.table or ()))
+        return d
 
 
 @dataclass
@@ -343,6 +380,25 @@ class RenderResult:
 
 
 _OUTPUTS = ("profile", "mueller", "stokes", "range", "cross_section")
+_TABLE_KEYS = ("n_z", "n_psi", "n_z_lambertian", "n_psi_lambertian", "n_z_double", "n_psi_double",
+               "double_order")
+
+#: The quality presets of :class:`Lidar` (``quality=``): BRDF table grids (keywords of
+#: :func:`pprender.brdf_table`; absent keys take its defaults: single n_z 256 / n_psi 32,
+#: multiple + diffuse 256 / 8, double 32 / 8 at order 48) and the default image
+#: resolution (pixels across one range FWHM). ``"reference"`` renders on the CPU in f64
+#: with exact BRDFs (no tables). Their cost and error are measured in docs/tradeoff.md.
+QUALITY: dict[str, dict[str, Any]] = {
+    "fast": {"table": {"n_z": 64, "n_psi": 16, "n_z_lambertian": 64, "n_psi_lambertian": 4,
+                       "n_z_double": 16, "n_psi_double": 4, "double_order": 32},
+             "pixels_per_fwhm": 2.0, "min_resolution": 32},
+    "balanced": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64},
+    "accurate": {"table": {"n_z": 1024, "n_psi": 64, "n_z_lambertian": 512,
+                           "n_psi_lambertian": 16, "n_z_double": 64, "n_psi_double": 16,
+                           "double_order": 96},
+                 "pixels_per_fwhm": 8.0, "min_resolution": 64},
+    "reference": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64},
+}
 
 
 def _rotations(attitudes: Any) -> np.ndarray:
@@ -405,10 +461,14 @@ def render(
                 f"{m.name or m!r} was built for {m.wavelength!r} m; build the materials at "
                 "the sensor's wavelength"
             )
+    if device not in ("auto", "cpu", "lavapipe", "gpu"):
+        raise Error(f'invalid device = {device!r}: one of "auto", "cpu" (lavapipe), "gpu"')
     rot = _rotations(attitudes)
     if len(rot) == 0:
         raise Error("invalid attitudes: empty batch (N = 0)")
-    t_tables = scene.prepare(sensor.bistatic_angle)
+    reference = sensor.quality == "reference"
+    topts = {} if reference else sensor.table_options()
+    t_tables = 0.0 if reference else float(scene._core.prepare(float(sensor.bistatic_angle), **topts))
     res = sensor.effective_resolution(scene.radius)
     pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]
     d = scene._core.render(
@@ -422,9 +482,10 @@ def render(
         image=("mueller" in outputs or "stokes" in outputs),
         range="range" in outputs,
         profile="profile" in outputs,
-        device=device,
+        device="reference" if reference else device,
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
+        **topts,
     )
     n = len(rot)
     mueller_out = pol is None

@@ -2,6 +2,7 @@
 //! tables, batched rendering, device information.
 
 use super::brdf::PyMaterial;
+use crate::brdf::table::{BrdfTableOptions, PartOptions};
 use crate::brdf::Material;
 use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
 use crate::render::gpu::{self, DeviceChoice, Outputs, SensorSetup};
@@ -29,6 +30,31 @@ fn rows3(a: &PyReadonlyArray2<'_, f64>, name: &'static str) -> crate::Result<Vec
         )));
     }
     Ok(v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+/// Table grid overrides from Python (`None`: the default of `BrdfTableOptions::resolve`).
+#[allow(clippy::too_many_arguments)]
+fn table_options(
+    n_z: Option<usize>,
+    n_psi: Option<usize>,
+    n_z_lambertian: Option<usize>,
+    n_psi_lambertian: Option<usize>,
+    n_z_double: Option<usize>,
+    n_psi_double: Option<usize>,
+    double_order: Option<usize>,
+) -> BrdfTableOptions {
+    let part = |n_z, n_psi| PartOptions {
+        n_z,
+        n_psi,
+        scale: None,
+    };
+    BrdfTableOptions {
+        single: part(n_z, n_psi),
+        lambertian: part(n_z_lambertian, n_psi_lambertian),
+        double: part(n_z_double, n_psi_double),
+        double_order,
+        frame: None,
+    }
 }
 
 #[pymethods]
@@ -108,11 +134,34 @@ impl PyRenderScene {
         self.mesh.faces.len()
     }
 
-    /// Build (or fetch from the cache) the GPU tables for a bistatic angle; returns the
-    /// build time in seconds (0 when cached).
-    fn prepare(&self, py: Python<'_>, bistatic_angle: f64) -> PyResult<f64> {
+    /// Build (or fetch from the cache) the GPU tables for a bistatic angle and table grid
+    /// (keywords as `brdf_table`); returns the build time in seconds (0 when cached).
+    #[pyo3(signature = (bistatic_angle, *, n_z=None, n_psi=None, n_z_lambertian=None,
+        n_psi_lambertian=None, n_z_double=None, n_psi_double=None, double_order=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn prepare(
+        &self,
+        py: Python<'_>,
+        bistatic_angle: f64,
+        n_z: Option<usize>,
+        n_psi: Option<usize>,
+        n_z_lambertian: Option<usize>,
+        n_psi_lambertian: Option<usize>,
+        n_z_double: Option<usize>,
+        n_psi_double: Option<usize>,
+        double_order: Option<usize>,
+    ) -> PyResult<f64> {
+        let opts = table_options(
+            n_z,
+            n_psi,
+            n_z_lambertian,
+            n_psi_lambertian,
+            n_z_double,
+            n_psi_double,
+            double_order,
+        );
         let t = std::time::Instant::now();
-        let (_, built) = py.detach(|| self.tables.get(bistatic_angle))?;
+        let (_, built) = py.detach(|| self.tables.get_with(bistatic_angle, &opts))?;
         Ok(if built {
             t.elapsed().as_secs_f64()
         } else {
@@ -121,9 +170,12 @@ impl PyRenderScene {
     }
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
+    /// `device = "reference"`: the f64 CPU reference (`twin::render_reference`, exact
+    /// BRDFs, no tables; the table keywords are then unused).
     #[pyo3(signature = (rotations, *, resolution, supersampling, bistatic_angle, polarization,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
-        pulse_spacing=0.0))]
+        pulse_spacing=0.0, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
+        n_z_double=None, n_psi_double=None, double_order=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -141,7 +193,23 @@ impl PyRenderScene {
         device: &str,
         pulse_samples: Option<Vec<f64>>,
         pulse_spacing: f64,
+        n_z: Option<usize>,
+        n_psi: Option<usize>,
+        n_z_lambertian: Option<usize>,
+        n_psi_lambertian: Option<usize>,
+        n_z_double: Option<usize>,
+        n_psi_double: Option<usize>,
+        double_order: Option<usize>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let opts = table_options(
+            n_z,
+            n_psi,
+            n_z_lambertian,
+            n_psi_lambertian,
+            n_z_double,
+            n_psi_double,
+            double_order,
+        );
         let rv = rotations.as_array();
         if rv.shape()[1] != 3 || rv.shape()[2] != 3 {
             return Err(crate::Error::Shape(format!(
@@ -161,7 +229,12 @@ impl PyRenderScene {
             })
             .collect();
         check_rotations(&rots)?;
-        let choice = DeviceChoice::parse(device)?;
+        let reference = device == "reference";
+        let choice = if reference {
+            DeviceChoice::parse("auto")?
+        } else {
+            DeviceChoice::parse(device)?
+        };
         let sensor = SensorSetup {
             resolution,
             supersampling,
@@ -181,7 +254,17 @@ impl PyRenderScene {
         };
         let mesh = self.mesh.clone();
         let r = py.detach(|| -> crate::Result<_> {
-            let (tables, _) = self.tables.get(bistatic_angle)?;
+            if reference {
+                let r = crate::render::twin::render_reference(
+                    &mesh,
+                    &sensor,
+                    &rots,
+                    outputs,
+                    &self.tables.materials,
+                );
+                return Ok((r, "reference (f64 CPU, exact BRDFs)".to_string()));
+            }
+            let (tables, _) = self.tables.get_with(bistatic_angle, &opts)?;
             let g = gpu::context(choice)?;
             let r = gpu::render(&g, &mesh, &tables, &sensor, &rots, outputs)?;
             Ok((r, g.info.name.clone()))

@@ -1286,7 +1286,7 @@ pub fn host_profile(
 }
 
 /// Sum `ss x ss` sub-pixels into each output pixel.
-fn downsample_sum(v: &[f32], m: usize, w: usize, ss: usize, ch: usize, out: &mut [f32]) {
+pub(crate) fn downsample_sum(v: &[f32], m: usize, w: usize, ss: usize, ch: usize, out: &mut [f32]) {
     let res = w / ss;
     for a in 0..m {
         for i in 0..res {
@@ -1309,7 +1309,14 @@ fn downsample_sum(v: &[f32], m: usize, w: usize, ss: usize, ch: usize, out: &mut
 }
 
 /// Range: mean over the covered sub-pixels (NaN if none); coverage: covered fraction.
-fn downsample_range(v: &[f32], m: usize, w: usize, ss: usize, out: &mut [f32], cov: &mut [f32]) {
+pub(crate) fn downsample_range(
+    v: &[f32],
+    m: usize,
+    w: usize,
+    ss: usize,
+    out: &mut [f32],
+    cov: &mut [f32],
+) {
     let res = w / ss;
     for a in 0..m {
         for i in 0..res {

@@ -9,10 +9,12 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-/// The materials of a scene and their packed tables by bistatic angle.
+type Cached = (Arc<GpuTables>, Arc<Vec<BrdfTable>>);
+
+/// The materials of a scene and their packed tables by bistatic angle and table options.
 pub struct SceneTables {
     pub materials: Vec<Arc<Material>>,
-    cache: Mutex<HashMap<u64, (Arc<GpuTables>, Arc<Vec<BrdfTable>>)>>,
+    cache: Mutex<HashMap<(u64, String), Cached>>,
 }
 
 impl SceneTables {
@@ -23,18 +25,30 @@ impl SceneTables {
         }
     }
 
-    /// The packed tables for `beta` (built on first use); `true` if built by this call.
+    /// The packed tables for `beta` with the default grids (built on first use); `true`
+    /// if built by this call.
     pub fn get(&self, beta: f64) -> Result<(Arc<GpuTables>, bool)> {
-        let (g, _, built) = self.get_with_tables(beta)?;
+        self.get_with(beta, &BrdfTableOptions::default())
+    }
+
+    /// As [`SceneTables::get`] with table options (`frame` is always the bisector frame,
+    /// which the kernel reads).
+    pub fn get_with(&self, beta: f64, opts: &BrdfTableOptions) -> Result<(Arc<GpuTables>, bool)> {
+        let (g, _, built) = self.get_with_tables(beta, opts)?;
         Ok((g, built))
     }
 
-    /// As [`SceneTables::get`], with the f64 tables (for the CPU twin).
+    /// As [`SceneTables::get_with`], with the f64 tables (for the CPU twin).
     pub fn get_with_tables(
         &self,
         beta: f64,
+        opts: &BrdfTableOptions,
     ) -> Result<(Arc<GpuTables>, Arc<Vec<BrdfTable>>, bool)> {
-        let key = beta.to_bits();
+        let opts = BrdfTableOptions {
+            frame: Some(TableFrame::Bisector),
+            ..*opts
+        };
+        let key = (beta.to_bits(), format!("{opts:?}"));
         if let Some((g, t)) = self
             .cache
             .lock()
@@ -43,10 +57,6 @@ impl SceneTables {
         {
             return Ok((g.clone(), t.clone(), false));
         }
-        let opts = BrdfTableOptions {
-            frame: Some(TableFrame::Bisector),
-            ..Default::default()
-        };
         let tables: Vec<BrdfTable> = self
             .materials
             .par_iter()

@@ -376,3 +376,39 @@ pub fn render_cpu(
         extent: lay.ext,
     }
 }
+
+/// The exact f64 reference renderer: [`render_cpu`] with every material evaluated by the
+/// core ([`crate::brdf::eval`], no tables), at `sensor.supersampling` sub-pixels per pixel
+/// side (images summed, range averaged over covered sub-pixels, as `gpu::render` does).
+/// Slow (the full model per pixel, double bounce quadrature included): the accuracy
+/// reference beside the GPU path.
+pub fn render_reference(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    materials: &[std::sync::Arc<crate::brdf::Material>],
+) -> Rendered {
+    let brdf = |m: usize, wi: V3, wo: V3| crate::brdf::eval(&materials[m], wi, wo, Frame::Sp);
+    let mut r = render_cpu(mesh, sensor, rotations, outputs, &brdf);
+    let ss = sensor.supersampling;
+    if ss > 1 {
+        let (w, res, n, ch) = (r.width, sensor.resolution, r.n, r.channels);
+        if let Some(img) = r.image.as_mut() {
+            let mut out = vec![0.0f32; n * res * res * ch];
+            super::gpu::downsample_sum(img, n, w, ss, ch, &mut out);
+            *img = out;
+        }
+        if let Some(rng) = r.range.as_mut() {
+            let mut out = vec![0.0f32; n * res * res];
+            let mut cov = vec![0.0f32; n * res * res];
+            super::gpu::downsample_range(rng, n, w, ss, &mut out, &mut cov);
+            *rng = out;
+            r.coverage = Some(cov);
+        }
+        r.height = res;
+        r.width = res;
+        r.pixel_size *= ss as f64;
+    }
+    r
+}

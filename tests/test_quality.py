@@ -1,0 +1,110 @@
+"""The quality dial (``Lidar(quality=..., table=...)``) and the f64 reference renderer.
+
+The reference (``quality="reference"``) evaluates every pixel's BRDF with the f64 core and
+casts pixel-centre rays exactly (src/render/twin.rs); it shares no table, f32 arithmetic or
+rasterization with the GPU path, so agreement is a check of both.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pprender
+from pprender import models
+
+ROUGH = pprender.Material("beckmann", alpha=0.3, eta=1.38 + 10.2j, terms=["single", "multiple"])
+
+
+def _sphere_scene(mat: pprender.Material = ROUGH) -> pprender.Scene:
+    return pprender.Scene(models.sphere(radius=0.5, subdivisions=4), mat, smooth=True)
+
+
+def _rel_image_error(a: np.ndarray, ref: np.ndarray, floor: float) -> float:
+    """Largest |a - ref| over Mueller elements, relative to M00_ref, on pixels brighter
+    than ``floor`` x the brightest (dim pixels near the terminator are graded separately)."""
+    m00 = ref[..., 0, 0]
+    keep = m00 > floor * m00.max()
+    return float((np.abs(a - ref)[keep] / m00[keep][:, None, None]).max())
+
+
+def test_presets_against_the_f64_reference_and_ordered_by_accuracy():
+    scene = _sphere_scene()
+    q = np.array([[1.0, 0, 0, 0], [0.9, 0.3, -0.2, 0.25]])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    out = {}
+    for quality in ("fast", "balanced", "accurate", "reference"):
+        s = pprender.Lidar(resolution=48, quality=quality)
+        out[quality] = pprender.render(scene, s, q, outputs=("mueller", "profile", "range"))
+    ref = out["reference"]
+    assert ref.device.startswith("reference")
+    # same pixels seen: visibility is exact in both (pixel centres), shared up to ties
+    np.testing.assert_array_equal(np.isfinite(out["balanced"].range), np.isfinite(ref.range))
+    err = {k: _rel_image_error(out[k].mueller, ref.mueller, 1e-2) for k in ("fast", "balanced", "accurate")}
+    # balanced: the default tables' error (docs/render-table.md: <= 1e-4 of M00 for this
+    # roughness) plus f32 shading (~1e-5): 1e-3 leaves room for the lobe's steepest pixels
+    print("max |dM| / M00 against the reference:", err)
+    assert err["balanced"] < 1e-3, err
+    assert err["accurate"] < 1e-3, err
+    # the coarse tables are measurably worse than the fine ones
+    assert err["fast"] > err["accurate"], err
+    # totals: within 1e-4 relative for balanced and accurate
+    for k in ("balanced", "accurate"):
+        np.testing.assert_allclose(out[k].cross_section, ref.cross_section, rtol=0,
+                                   atol=1e-4 * ref.cross_section[:, 0, 0].max())
+
+
+def test_reference_supersampling_and_stokes():
+    scene = _sphere_scene()
+    q = np.array([[1.0, 0, 0, 0]])
+    s1 = pprender.Lidar(resolution=24, supersampling=2, quality="reference", polarization=[1, 1, 0, 0])
+    r = pprender.render(scene, s1, q, outputs=("stokes", "profile", "range"))
+    assert r.stokes.shape == (1, 24, 24, 4) and r.range.shape == (1, 24, 24)
+    g = pprender.render(scene, pprender.Lidar(resolution=24, supersampling=2, polarization=[1, 1, 0, 0]),
+                        q, outputs=("stokes", "profile", "range"))
+    np.testing.assert_allclose(r.pixel_size, g.pixel_size)
+    np.testing.assert_allclose(r.coverage, g.coverage)
+    # tables + f32 against exact f64: 1e-3 of S0 (the first test bounds it per pixel)
+    np.testing.assert_allclose(r.cross_section, g.cross_section, rtol=0, atol=1e-3 * g.cross_section[0, 0])
+    np.testing.assert_allclose(r.profile.sum(axis=1), r.cross_section, rtol=0,
+                               atol=1e-9 * r.cross_section[0, 0])
+
+
+def test_table_overrides_change_the_tables_and_resolution_follows_the_preset():
+    s = pprender.Lidar(quality="fast", table={"n_z": 512})
+    assert s.table_options()["n_z"] == 512 and s.table_options()["double_order"] == 32
+    assert pprender.Lidar().table_options() == {}
+    radius = 0.3
+    fast = pprender.Lidar(quality="fast").effective_resolution(radius)
+    bal = pprender.Lidar().effective_resolution(radius)
+    acc = pprender.Lidar(quality="accurate").effective_resolution(radius)
+    assert abs(bal - 2 * fast) <= 1 and abs(acc - 2 * bal) <= 1
+    assert pprender.Lidar(quality="accurate", resolution=50).effective_resolution(radius) == 50
+    # a coarser single-term grid changes a glossy material's image (the override is used)
+    glossy = pprender.Material("beckmann", alpha=0.05, eta=1.5 + 0j, terms=["single"])
+    scene = _sphere_scene(glossy)
+    q = np.array([[1.0, 0, 0, 0]])
+    a = pprender.render(scene, pprender.Lidar(resolution=32, table={"n_z": 8}), q, outputs=("mueller",))
+    b = pprender.render(scene, pprender.Lidar(resolution=32), q, outputs=("mueller",))
+    assert np.abs(a.mueller - b.mueller).max() > 1e-3 * b.mueller[..., 0, 0].max()
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"quality": "ultra"}, "quality"),
+        ({"table": {"n_zz": 3}}, "table"),
+        ({"table": {"n_z": 1}}, "table"),
+        ({"table": {"n_z": 2.5}}, "table"),
+        ({"table": 7}, "table"),
+    ],
+)
+def test_bad_quality_settings(kwargs, name):
+    with pytest.raises(pprender.Error, match=name):
+        pprender.Lidar(**kwargs)
+
+
+def test_bad_device():
+    with pytest.raises(pprender.Error, match="device"):
+        pprender.render(_sphere_scene(), pprender.Lidar(resolution=16), np.array([[1.0, 0, 0, 0]]),
+                        device="tpu")
