@@ -414,7 +414,13 @@ class Instrument:
         s = self.signal_counts(for_profile, bin_edges=bin_edges)
         if not s > 0:
             raise Error("invalid for_profile: it gives no signal in any channel (cannot scale)")
-        return replace(self, pulse_energy=self.pulse_energy * n / s)
+        e = self.pulse_energy * n / s
+        if not e <= 1e3:
+            raise Error(
+                f"invalid total_signal_counts = {total_signal_counts!r}: it needs pulse_energy = {e:.3g} J, "
+                "beyond (0, 1e3] J; raise n_pulses (or the aperture) first"
+            )
+        return replace(self, pulse_energy=e)
 
 
 # ---------------------------------------------------------------------- jitter
@@ -513,8 +519,11 @@ def _channel_cross_sections(p: np.ndarray, mueller: bool, channels: Channels) ->
                 "(render with Lidar(polarization=None))"
             )
         sig = np.einsum("ci,...bi->...bc", rows, p)
+    # The renderer accumulates in float32: a fully polarized return (a mirror in its
+    # cross channel) comes out at -1e-7 of the intensity. 1e-5 of the largest intensity
+    # allows that and still catches unphysical input; what passes is clipped to 0.
     scale = float(np.max(np.abs(p[..., 0, 0] if mueller else p[..., 0]), initial=0.0))
-    if np.any(sig < -1e-9 * scale):
+    if np.any(sig < -1e-5 * scale):
         raise Error(
             "invalid profile: negative cross-section in a polarization channel (the profile is "
             "not a physical Mueller/Stokes profile)"
