@@ -193,6 +193,8 @@ class ForwardModel:
     bin_edges : array (B + 1,)
         Range bin edges of the data (m), e.g. ``measurement.bin_edges``; rendered profiles
         are mapped onto them with the instrument's jitter (:func:`expected_counts`).
+        Signal rendered outside them is dropped, as by a range gate: make them cover the
+        target at the largest ``scale`` within the bounds.
     free : sequence of str
         Free parameter names (from :data:`PARAMETERS`), in the order of ``theta``.
     lidar : Lidar, optional
@@ -304,15 +306,16 @@ class ForwardModel:
         self.device = device
         # geometry and materials (validated once by building the reference scene)
         base = _lidar.Scene(mesh, materials, smooth=smooth, face_material=face_material, wavelength=instrument.wavelength)
-        v, f, meta, vn = _lidar._mesh_arrays(mesh)
+        verts, faces, meta, vn = _lidar._mesh_arrays(mesh)
+        fm: Any
         if face_material is not None:
             fm = np.asarray(face_material)
         elif isinstance(materials, (Material, str)):
-            fm = np.zeros(len(f), dtype=np.int64)
+            fm = np.zeros(len(faces), dtype=np.int64)
         else:
             fm = meta.get("pprender_material") if meta else None
-            fm = np.zeros(len(f), dtype=np.int64) if fm is None else np.asarray(fm)
-        self._vertices, self._faces, self._face_material = v, f, fm.astype(np.int64)
+            fm = np.zeros(len(faces), dtype=np.int64) if fm is None else np.asarray(fm)
+        self._vertices, self._faces, self._face_material = verts, faces, np.asarray(fm).astype(np.int64)
         self._normals = vn if smooth else None
         self.materials: list[Material] = list(base.materials)
         self.parts = base.parts
