@@ -24,12 +24,19 @@ from . import _core
 from ._core import BrdfTable, Error, Material, __version__, brdf_table
 from .lidar import SPEED_OF_LIGHT, Lidar, RenderResult, Scene, device_info, render
 from . import classify, database, so3  # noqa: E402  (their heavy imports are lazy)
+from . import instrument  # noqa: E402
 from .classify import Classifier
+from .instrument import Instrument, Measurement, expected_counts, measure
 from .database import build_database, open_database
 
 __all__ = [
     "BrdfTable",
     "Classifier",
+    "Instrument",
+    "Measurement",
+    "expected_counts",
+    "instrument",
+    "measure",
     "build_database",
     "classify",
     "database",
@@ -171,9 +178,10 @@ def monostatic_table(
 
 
 def __getattr__(name: str) -> object:
-    # pprender.models imports trimesh (about 0.5 s): load it on first use.
-    if name == "models":
+    # pprender.models imports trimesh (about 0.5 s), fit scipy's spatial module, plot
+    # matplotlib: load them on first use.
+    if name in ("models", "fit", "plot"):
         import importlib
 
-        return importlib.import_module(".models", __name__)
+        return importlib.import_module("." + name, __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
