@@ -1,0 +1,245 @@
+"""Speed versus accuracy of the quality dial (``Lidar(quality=...)``), measured.
+
+``python -m pprender.bench_tradeoff [--write] [--quick]`` renders one scene set at each
+quality setting, times it, and measures its error against the exact f64 reference
+(``quality="reference"``: every pixel's BRDF evaluated by the f64 core, pixel-centre ray
+casting, no tables, no f32). ``--write`` writes the table to ``docs/tradeoff.md`` and the
+Pareto plot (error against time) to ``docs/tradeoff.png``.
+
+Method
+------
+* Scenes: a smooth-shaded sphere (radius 0.2 m), a square plate (0.3 m, tilted 40 deg and
+  spun 0.3 rad about the line of sight), each with six materials (Beckmann, APS masking,
+  single + multiple scattering: aluminium at 1064 nm and a dielectric of eta 1.5, alpha
+  0.05 / 0.2 / 0.5), and the default 3U CubeSat (its own materials, single + multiple).
+  Monostatic, full Mueller output, 100 ps pulse, default bin width.
+* Resolutions: ``fast`` at the preset's default for the scene (``n``), ``balanced`` at
+  ``2 n`` and ``accurate`` at ``4 n`` (the presets' ratios, made exact), so one reference
+  at ``8 n`` serves all three: its images summed over 8 x 8 (4 x 4, 2 x 2) sub-pixels are
+  the area-integrated pixel values at ``n`` (``2 n``, ``4 n``), the quantity a pixel
+  estimates.
+* Image error: ``|M_ij - M_ij,ref|`` per pixel and element, relative to the reference
+  image's largest ``M00``: the maximum over pixels and elements, and the RMS over pixels
+  covered in either image (M00, and the worst element). Edge pixels dominate the maximum
+  at coarse resolutions: a pixel-centre sample is not a pixel area.
+* Profile error: ``sum_b |p_b - p_b,ref| / sigma_ref`` for M00 (L1 relative to the total
+  cross-section), and the relative error of the total M00 cross-section; the reference
+  profile is at ``8 n``.
+* Time: seconds per realization (attitude) for profile + Mueller images, the best of
+  ``repeats`` renders of a batch of ``batch`` attitudes on the chosen device; the
+  reference's time is for its (few) error attitudes, on the CPU with rayon.
+
+The double bounce is left out: its exact per-pixel evaluation (~13 ms per BRDF call) makes
+an f64 reference image take hours; its table error is measured separately in
+docs/render-table.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+import pprender
+
+SETTINGS = ("fast", "balanced", "accurate")
+ALUMINIUM_1064 = 1.3763 + 10.2449j
+
+
+@dataclass
+class Row:
+    scene: str
+    material: str
+    setting: str
+    resolution: int
+    seconds: float  # per realization
+    img_max: float
+    img_rms00: float
+    img_rms_worst: float
+    prof_l1: float
+    total_rel: float
+
+
+def _rot(axis: str, t: float) -> np.ndarray:
+    c, s = math.cos(t), math.sin(t)
+    if axis == "x":
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], float)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], float)
+
+
+def materials() -> dict[str, pprender.Material]:
+    out = {}
+    for label, eta in (("metal", ALUMINIUM_1064), ("dielectric", 1.5 + 0j)):
+        for alpha in (0.05, 0.2, 0.5):
+            out[f"{label} a{alpha:g}"] = pprender.Material(
+                "beckmann", alpha=alpha, eta=eta, terms=["single", "multiple"]
+            )
+    return out
+
+
+def scenes(quick: bool = False) -> Iterator[tuple[str, str, pprender.Scene, np.ndarray]]:
+    """(scene name, material name, scene, attitudes (k, 3, 3)) for the error renders."""
+    from . import models
+    from .bench_render import cubesat_scene, random_quaternions
+
+    mats = materials()
+    if quick:
+        mats = {k: mats[k] for k in ("metal a0.2",)}
+    sphere = models.sphere(radius=0.2, subdivisions=5)
+    plate = models.plate(width=0.3, height=0.3, thickness=1e-3)
+    tilt = _rot("z", 0.3) @ _rot("x", math.radians(40))
+    q = random_quaternions(2, seed=11)
+    rq = pprender.lidar._rotations(q)
+    for name, m in mats.items():
+        yield "sphere", name, pprender.Scene(sphere, m, smooth=True), rq[:1]
+        if not quick:
+            yield "plate", name, pprender.Scene(plate, m), tilt[None]
+    if not quick:
+        yield "3U CubeSat", "default", cubesat_scene(terms=("single", "multiple")), rq
+
+
+def _sum_down(img: np.ndarray, f: int) -> np.ndarray:
+    n, h, w = img.shape[:3]
+    return img.reshape(n, h // f, f, w // f, f, *img.shape[3:]).sum(axis=(2, 4))
+
+
+def _time(scene: pprender.Scene, sensor: pprender.Lidar, rots: np.ndarray, repeats: int,
+          device: str) -> float:
+    pprender.render(scene, sensor, rots[:2], outputs=("profile", "mueller"), device=device)  # warm
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        pprender.render(scene, sensor, rots, outputs=("profile", "mueller"), device=device)
+        best = min(best, time.perf_counter() - t0)
+    return best / len(rots)
+
+
+def measure(quick: bool = False, batch: int = 32, repeats: int = 3, device: str = "auto",
+            progress: bool = True) -> list[Row]:
+    """Every (scene, material, setting) row, plus the reference's own row per scene."""
+    from .bench_render import random_quaternions
+
+    timing_rots = pprender.lidar._rotations(random_quaternions(batch, seed=3))
+    rows: list[Row] = []
+    for sname, mname, scene, rots in scenes(quick):
+        n = pprender.Lidar(quality="fast").effective_resolution(scene.radius)
+        if quick:
+            n = min(n, 24)
+        t0 = time.perf_counter()
+        ref = pprender.render(scene, pprender.Lidar(quality="reference", resolution=8 * n), rots,
+                              outputs=("profile", "mueller"))
+        t_ref = (time.perf_counter() - t0) / len(rots)
+        sig = ref.cross_section[:, 0, 0]
+        rows.append(Row(sname, mname, "reference", 8 * n, t_ref, 0.0, 0.0, 0.0, 0.0, 0.0))
+        for setting, f in zip(SETTINGS, (8, 4, 2)):
+            sensor = pprender.Lidar(quality=setting, resolution=(8 // f) * n)
+            r = pprender.render(scene, sensor, rots, outputs=("profile", "mueller"), device=device)
+            truth = _sum_down(ref.mueller, f)
+            peak = truth[..., 0, 0].max()
+            d = np.abs(r.mueller - truth) / peak
+            covered = (truth[..., 0, 0] > 0) | (r.mueller[..., 0, 0] > 0)
+            rms = np.sqrt((d[covered] ** 2).mean(axis=0))  # (4, 4)
+            prof_l1 = float(max(np.abs(r.profile[a, :, 0, 0] - ref.profile[a, :, 0, 0]).sum() / sig[a]
+                                for a in range(len(rots))))
+            total = float(np.abs(r.cross_section[:, 0, 0] / sig - 1).max())
+            secs = _time(scene, sensor, timing_rots, repeats, device)
+            rows.append(Row(sname, mname, setting, sensor.effective_resolution(scene.radius), secs,
+                            float(d.max()), float(rms[0, 0]), float(rms.max()), prof_l1, total))
+            if progress:
+                print(_line(rows[-1]), flush=True)
+    return rows
+
+
+def _line(r: Row) -> str:
+    if r.setting == "reference":
+        return (f"| {r.scene} | {r.material} | reference | {r.resolution} | {1e3 * r.seconds:.0f} "
+                "| - | - | - | - | - |")
+    return (f"| {r.scene} | {r.material} | {r.setting} | {r.resolution} | {1e3 * r.seconds:.2f} | "
+            f"{r.img_max:.1e} | {r.img_rms00:.1e} | {r.img_rms_worst:.1e} | {r.prof_l1:.1e} | "
+            f"{r.total_rel:.1e} |")
+
+
+HEADER = ("| scene | material | setting | pixels | ms / realization | image max | image RMS M00 "
+          "| image RMS worst | profile L1 | total |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|")
+
+
+def summary(rows: list[Row]) -> str:
+    """Median over scenes of each setting's time and errors (the README's table)."""
+    lines = ["| setting | median ms / realization | median image RMS M00 | median profile L1 "
+             "| worst profile L1 | worst total |", "|---|---:|---:|---:|---:|---:|"]
+    for s in SETTINGS:
+        rs = [r for r in rows if r.setting == s]
+        if not rs:
+            continue
+        lines.append(
+            f"| {s} | {1e3 * np.median([r.seconds for r in rs]):.2f} | "
+            f"{np.median([r.img_rms00 for r in rs]):.1e} | {np.median([r.prof_l1 for r in rs]):.1e} | "
+            f"{max(r.prof_l1 for r in rs):.1e} | {max(r.total_rel for r in rs):.1e} |")
+    return "\n".join(lines)
+
+
+def plot(rows: list[Row], path: Any = None) -> Any:
+    """Pareto plot: profile L1 and image RMS error against time per realization."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    colours = {"fast": "tab:green", "balanced": "tab:blue", "accurate": "tab:red"}
+    for ax, key, label in ((axes[0], "prof_l1", "profile L1 error / total"),
+                           (axes[1], "img_rms00", "image RMS error of M00 / peak")):
+        for s in SETTINGS:
+            rs = [r for r in rows if r.setting == s]
+            ax.loglog([1e3 * r.seconds for r in rs], [max(getattr(r, key), 1e-9) for r in rs], "o",
+                      color=colours[s], label=s, alpha=0.7)
+        ax.set_xlabel("ms per realization")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend()
+    fig.suptitle("pprender quality settings against the f64 reference")
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
+
+
+def main(argv: list[str] | None = None) -> str:
+    ap = argparse.ArgumentParser(prog="python -m pprender.bench_tradeoff", description=__doc__.split("\n")[0])
+    ap.add_argument("--write", action="store_true", help="write docs/tradeoff.md and docs/tradeoff.png")
+    ap.add_argument("--quick", action="store_true", help="one scene, small (a smoke run)")
+    ap.add_argument("--device", default="auto")
+    ap.add_argument("--batch", type=int, default=32)
+    ap.add_argument("--repeats", type=int, default=3)
+    a = ap.parse_args(argv)
+    info = pprender.device_info(a.device)
+    print(HEADER)
+    rows = measure(quick=a.quick, batch=a.batch, repeats=a.repeats, device=a.device)
+    text = "\n".join([
+        "# Speed versus accuracy: the quality dial", "",
+        "Generated by `python -m pprender.bench_tradeoff --write` (method in the module "
+        "docstring; do not edit by hand). Device: " + f"{info['name']} ({info['device_type']}). "
+        "Errors are against the exact f64 reference (`Lidar(quality=\"reference\")`) at 8x the "
+        "`fast` resolution, its images summed to each setting's pixels; times are per "
+        f"realization (profile + Mueller images, batch of {a.batch}, best of {a.repeats}).", "",
+        "## Summary (medians over the scenes)", "", summary(rows), "",
+        "![error against time](tradeoff.png)", "",
+        "## Every scene", "", HEADER, *[_line(r) for r in rows], "",
+    ])
+    print()
+    print(summary(rows))
+    if a.write:
+        docs = Path(__file__).resolve().parents[2] / "docs"
+        (docs / "tradeoff.md").write_text(text)
+        plot(rows, docs / "tradeoff.png")
+        print(f"wrote {docs / 'tradeoff.md'} and {docs / 'tradeoff.png'}")
+    return text
+
+
+if __name__ == "__main__":
+    main()
