@@ -55,6 +55,10 @@ override WRITE_TOTAL: bool = true;
 // buffer holds (r0, a, b) per pixel, the range and the widths of its footprint.
 override WRITE_FOOTPRINT: bool = false;
 override SHADOWS: bool = false;    // transmitter cast shadows (beta > 0), see above
+// Mueller elements to look up (bit 4 i + j: M_ij in the table frame); the others are left
+// zero. Set from what the output needs (SensorSetup::element_mask in src/render/gpu.rs:
+// an unpolarized transmitter's intensity needs M00 alone).
+override ELEMENT_MASK: u32 = 0xffffu;
 
 const PI: f32 = 3.14159265358979;
 const MAX_PARTS: u32 = 3u;
@@ -168,6 +172,9 @@ fn add_part(m: u32, p: u32, z: f32, psi: f32, acc: ptr<function, array<f32, 16>>
     var vals: array<f32, 16>;
     if (n_psi == 0u) {
         for (var e = 0u; e < 16u; e++) {
+            if (((ELEMENT_MASK >> e) & 1u) == 0u) {
+                continue;
+            }
             vals[e] = interp_z(base, 0u, n_z, i, t, e);
         }
     } else {
@@ -175,6 +182,9 @@ fn add_part(m: u32, p: u32, z: f32, psi: f32, acc: ptr<function, array<f32, 16>>
         let j = min(u32(y), n_psi - 1u);
         let s = y - f32(j);
         for (var e = 0u; e < 16u; e++) {
+            if (((ELEMENT_MASK >> e) & 1u) == 0u) {
+                continue;
+            }
             var q: array<f32, 4>;
             for (var k = 0; k < 4; k++) {
                 let rs = psi_row(i32(j) - 1 + k, n_psi);
@@ -194,7 +204,9 @@ fn add_part(m: u32, p: u32, z: f32, psi: f32, acc: ptr<function, array<f32, 16>>
     let m00 = exp(max(vals[0], LN_FLOOR_F32));
     (*acc)[0] += m00;
     for (var e = 1u; e < 16u; e++) {
-        (*acc)[e] += m00 * clamp(vals[e], -1.0, 1.0);
+        if (((ELEMENT_MASK >> e) & 1u) != 0u) {
+            (*acc)[e] += m00 * clamp(vals[e], -1.0, 1.0);
+        }
     }
 }
 

@@ -108,3 +108,35 @@ def test_bad_device():
     with pytest.raises(pprender.Error, match="device"):
         pprender.render(_sphere_scene(), pprender.Lidar(resolution=16), np.array([[1.0, 0, 0, 0]]),
                         device="tpu")
+
+
+def test_intensity_only_equals_the_stokes_s0_and_looks_up_fewer_elements():
+    """Specialization: intensity-only output (M00 alone for an unpolarized transmitter, the
+    first row's needed columns otherwise) must equal S0 of the full Stokes render."""
+    from pprender.bench_render import cubesat_scene, random_quaternions
+
+    scene = cubesat_scene(terms=("single", "multiple"))
+    q = random_quaternions(3, seed=2)
+    for pol in ([1, 0, 0, 0], [1, 0.6, -0.3, 0.5]):
+        full = pprender.render(scene, pprender.Lidar(resolution=48, polarization=pol), q,
+                               outputs=("stokes", "profile"))
+        s = pprender.Lidar(resolution=48, polarization=pol, intensity_only=True)
+        one = pprender.render(scene, s, q, outputs=("intensity", "profile"))
+        assert one.intensity.shape == full.stokes.shape[:3] and one.profile.shape == full.profile.shape[:2]
+        assert one.cross_section.shape == (3,)
+        # same f32 arithmetic for the elements used: equal to f32 rounding
+        np.testing.assert_allclose(one.intensity, full.stokes[..., 0], rtol=1e-6, atol=1e-12)
+        np.testing.assert_allclose(one.profile, full.profile[..., 0], rtol=1e-6, atol=1e-9 * one.cross_section.max())
+        np.testing.assert_allclose(one.cross_section, full.cross_section[:, 0], rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "kwargs, outputs",
+    [({"intensity_only": True}, ("profile",)),
+     ({"intensity_only": True, "polarization": [1, 0, 0, 0]}, ("stokes",)),
+     ({"polarization": [1, 0, 0, 0]}, ("intensity",))],
+)
+def test_intensity_only_errors(kwargs, outputs):
+    with pytest.raises(pprender.Error, match="intensity"):
+        s = pprender.Lidar(resolution=16, **kwargs)
+        pprender.render(_sphere_scene(), s, np.array([[1.0, 0, 0, 0]]), outputs=outputs)

@@ -271,6 +271,7 @@ class RenderScene:
         supersampling: int,
         bistatic_angle: float,
         polarization: Sequence[float] | None,
+        intensity_only: bool,
         sigma_range: float,
         bin_width: float,
         image: bool,

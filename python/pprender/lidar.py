@@ -202,6 +202,10 @@ class Lidar:
     ``n_psi`` (single term), ``n_z_lambertian``, ``n_psi_lambertian`` (multiple + diffuse),
     ``n_z_double``, ``n_psi_double``, ``double_order`` (:func:`pprender.brdf_table`).
     ``resolution`` and ``supersampling`` given explicitly override the preset's.
+    ``intensity_only``: with a ``polarization``, compute only the received intensity ``S0``
+    (``"intensity"`` images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel
+    then looks up only the Mueller elements it needs (``M00`` alone for an unpolarized
+    transmitter).
     ``bistatic_angle`` (rad) in [0, pi/2). ``polarization``: transmitted Stokes vector
     (4,) in the transmit basis, or None for full Mueller output. ``wavelength`` (m) must
     match the materials' wavelength (their refractive indices are for one wavelength).
@@ -218,8 +222,14 @@ class Lidar:
     pulse_sample_spacing: float | None = None
     quality: str = "balanced"
     table: Any = None
+    intensity_only: bool = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.intensity_only, (bool, np.bool_)):
+            raise Error(f"invalid intensity_only = {self.intensity_only!r}: True or False")
+        if self.intensity_only and self.polarization is None:
+            raise Error("invalid intensity_only = True: needs a transmitted polarization (a Stokes vector); "
+                        "without one the output is the Mueller matrix")
         if self.quality not in QUALITY:
             raise Error(f"invalid quality = {self.quality!r}: one of {tuple(QUALITY)}")
         if self.table is not None:
@@ -348,7 +358,7 @@ class RenderResult:
     when the sensor has a ``polarization``. ``profile``: (N, B, 4, 4) or (N, B, 4), m^2 per
     bin, summing over bins to ``cross_section``; ``range_axis`` (B,) bin centres (m),
     ``bin_edges`` (B+1,), ``time_axis`` (B,) round-trip delays ``2 r / c`` (s).
-    ``mueller`` (N, H, W, 4, 4) / ``stokes`` (N, H, W, 4): m^2 per pixel. ``range``
+    ``mueller`` (N, H, W, 4, 4) / ``stokes`` (N, H, W, 4) / ``intensity`` (N, H, W): m^2 per pixel. ``range``
     (N, H, W) metres, NaN where nothing is seen; ``coverage`` (N, H, W) the covered
     fraction of each pixel's sub-pixels.
     """
@@ -361,6 +371,7 @@ class RenderResult:
     profile: np.ndarray | None = None
     mueller: np.ndarray | None = None
     stokes: np.ndarray | None = None
+    intensity: np.ndarray | None = None
     range: np.ndarray | None = None
     coverage: np.ndarray | None = None
     table_seconds: float = 0.0
@@ -379,7 +390,7 @@ class RenderResult:
         return None if self.coverage is None else self.coverage > 0
 
 
-_OUTPUTS = ("profile", "mueller", "stokes", "range", "cross_section")
+_OUTPUTS = ("profile", "mueller", "stokes", "intensity", "range", "cross_section")
 _TABLE_KEYS = ("n_z", "n_psi", "n_z_lambertian", "n_psi_lambertian", "n_z_double", "n_psi_double",
                "double_order")
 
@@ -452,6 +463,11 @@ def render(
             'invalid outputs: "mueller" needs Lidar(polarization=None); with a transmitted '
             'polarization request "stokes"'
         )
+    if sensor.intensity_only and ("stokes" in outputs or "mueller" in outputs):
+        raise Error('invalid outputs: Lidar(intensity_only=True) renders "intensity" images, not '
+                    '"stokes" or "mueller"')
+    if "intensity" in outputs and not sensor.intensity_only:
+        raise Error('invalid outputs: "intensity" needs Lidar(intensity_only=True, polarization=...)')
     if "stokes" in outputs and sensor.polarization is None:
         raise Error('invalid outputs: "stokes" needs Lidar(polarization=...) (a Stokes vector)')
     for m in scene.materials:
@@ -477,9 +493,10 @@ def render(
         supersampling=int(sensor.supersampling),
         bistatic_angle=float(sensor.bistatic_angle),
         polarization=pol,
+        intensity_only=bool(sensor.intensity_only),
         sigma_range=sensor.sigma_range,
         bin_width=sensor.effective_bin_width(),
-        image=("mueller" in outputs or "stokes" in outputs),
+        image=("mueller" in outputs or "stokes" in outputs or "intensity" in outputs),
         range="range" in outputs,
         profile="profile" in outputs,
         device="reference" if reference else device,
@@ -491,7 +508,7 @@ def render(
     mueller_out = pol is None
     tot = d["total"]
     r = RenderResult(
-        cross_section=tot.reshape(n, 4, 4) if mueller_out else tot,
+        cross_section=tot.reshape(n, 4, 4) if mueller_out else (tot[:, 0] if sensor.intensity_only else tot),
         bin_edges=d["bin_edges"],
         pixel_size=float(d["pixel_size"]),
         extent=float(d["extent"]),
@@ -500,13 +517,16 @@ def render(
     )
     if "profile" in d:
         p = d["profile"]
-        r.profile = p.reshape(n, p.shape[1], 4, 4) if mueller_out else p
+        r.profile = p.reshape(n, p.shape[1], 4, 4) if mueller_out else (p[..., 0] if sensor.intensity_only else p)
     if "image" in d:
         img = d["image"]
         if mueller_out:
             r.mueller = img.reshape(img.shape[:3] + (4, 4))
         else:
-            r.stokes = img
+            if sensor.intensity_only:
+                r.intensity = img[..., 0]
+            else:
+                r.stokes = img
     if "range" in d:
         r.range = d["range"]
         r.coverage = d["coverage"]

@@ -173,6 +173,7 @@ impl PyRenderScene {
     /// `device = "reference"`: the f64 CPU reference (`twin::render_reference`, exact
     /// BRDFs, no tables; the table keywords are then unused).
     #[pyo3(signature = (rotations, *, resolution, supersampling, bistatic_angle, polarization,
+        intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
         pulse_spacing=0.0, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
         n_z_double=None, n_psi_double=None, double_order=None))]
@@ -185,6 +186,7 @@ impl PyRenderScene {
         supersampling: usize,
         bistatic_angle: f64,
         polarization: Option<[f64; 4]>,
+        intensity_only: bool,
         sigma_range: f64,
         bin_width: f64,
         image: bool,
@@ -240,6 +242,7 @@ impl PyRenderScene {
             supersampling,
             bistatic_angle,
             polarization,
+            intensity_only,
             sigma_range,
             bin_width,
             pulse: pulse_samples

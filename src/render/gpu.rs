@@ -83,6 +83,8 @@ struct ShadeKey {
     footprint: bool,
     /// Transmitter cast shadows (bistatic only).
     shadows: bool,
+    /// The Mueller elements looked up ([`SensorSetup::element_mask`]).
+    elements: u32,
 }
 
 static CONTEXTS: OnceLock<Mutex<HashMap<DeviceChoice, Arc<Gpu>>>> = OnceLock::new();
@@ -327,6 +329,7 @@ impl Gpu {
             ("WRITE_TOTAL", b(key.total)),
             ("WRITE_FOOTPRINT", b(key.footprint)),
             ("SHADOWS", b(key.shadows)),
+            ("ELEMENT_MASK", key.elements as f64),
         ];
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let p = self
@@ -518,6 +521,8 @@ pub struct SensorSetup {
     pub bistatic_angle: f64,
     /// Transmitted Stokes vector; `None`: full Mueller output.
     pub polarization: Option<[f64; 4]>,
+    /// With a `polarization`: output the received intensity `S0` only (1 channel).
+    pub intensity_only: bool,
     /// Pulse standard deviation in range units (m).
     pub sigma_range: f64,
     /// Range-bin width (m).
@@ -526,6 +531,50 @@ pub struct SensorSetup {
     /// `sigma_range`. Its profile is accumulated on the host in f64 from the kernel's
     /// per-pixel footprints (see [`host_profile`]); `sigma_range` is then unused.
     pub pulse: Option<Arc<SampledPulse>>,
+}
+
+impl SensorSetup {
+    /// Output channels: 16 (Mueller), 4 (Stokes `M s_tx`) or 1 (intensity `(M s_tx)_0`).
+    pub fn channels(&self) -> usize {
+        match (self.polarization, self.intensity_only) {
+            (None, _) => 16,
+            (Some(_), false) => 4,
+            (Some(_), true) => 1,
+        }
+    }
+
+    /// The Mueller elements (bit `4 i + j` for `M_ij`, sp frame) the output needs; the
+    /// kernel looks up only these. The telescope output is `L(ao) M L(ai) s_tx`: rows 1
+    /// and 2 mix under `L(ao)`, columns 1 and 2 under `L(ai)`. Column `j` is needed when
+    /// `(L(ai) s_tx)_j` can be non-zero (column 0 when `S0 != 0`, columns 1 and 2 when
+    /// `S1` or `S2 != 0`, column 3 when `S3 != 0`), row `i` when the output has it
+    /// (intensity: row 0 only). `M00` is always looked up (it scales the others).
+    pub fn element_mask(&self) -> u32 {
+        let Some(s) = self.polarization else {
+            return 0xffff;
+        };
+        let cols = [
+            s[0] != 0.0,
+            s[1] != 0.0 || s[2] != 0.0,
+            s[1] != 0.0 || s[2] != 0.0,
+            s[3] != 0.0,
+        ];
+        let rows = [
+            true,
+            !self.intensity_only,
+            !self.intensity_only,
+            !self.intensity_only,
+        ];
+        let mut m = 1u32;
+        for i in 0..4 {
+            for j in 0..4 {
+                if rows[i] && cols[j] {
+                    m |= 1 << (4 * i + j);
+                }
+            }
+        }
+        m
+    }
 }
 
 /// The pulse support in standard deviations (weights beyond it are below 1e-9).
@@ -635,7 +684,7 @@ pub fn render(
             ),
         ));
     }
-    let channels: usize = if sensor.polarization.is_some() { 4 } else { 16 };
+    let channels = sensor.channels();
     let n = rotations.len();
     let n_tri = mesh.faces.len();
     let geometry = mesh.gpu_geometry();
@@ -800,6 +849,7 @@ fn render_chunks(
         total: !kern.profile,
         footprint: kern.footprint,
         shadows: sensor.bistatic_angle > 0.0,
+        elements: sensor.element_mask(),
     };
     let rng_stride = if kern.footprint { 3 } else { 1 };
     let pipeline = gpu.shade_pipeline(key)?;
@@ -1394,6 +1444,7 @@ pub(crate) mod tests {
             supersampling: 1,
             bistatic_angle: 0.0,
             polarization: None,
+            intensity_only: false,
             sigma_range: 0.01,
             bin_width: 0.02,
             pulse: None,

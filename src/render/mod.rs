@@ -100,6 +100,13 @@ pub const MAX_IMAGE_SIDE: usize = 8192;
 
 /// Validate a sensor set-up (every parameter named with its allowed range).
 pub fn check_sensor(s: &gpu::SensorSetup) -> Result<()> {
+    if s.intensity_only && s.polarization.is_none() {
+        return Err(Error::param(
+            "intensity_only",
+            true,
+            "only with a transmitted polarization (a Stokes vector); without one the output is the Mueller matrix",
+        ));
+    }
     if s.resolution < 1 || s.resolution > MAX_IMAGE_SIDE {
         return Err(Error::param(
             "resolution",

@@ -278,7 +278,7 @@ pub fn render_cpu(
 ) -> Rendered {
     let lay = Layout::new(mesh, sensor);
     let w = lay.width;
-    let ch = if sensor.polarization.is_some() { 4 } else { 16 };
+    let ch = sensor.channels();
     let nb = lay.n_bins;
     let edges: Vec<f64> = (0..=nb)
         .map(|k| lay.r_min + k as f64 * sensor.bin_width)
@@ -314,7 +314,7 @@ pub fn render_cpu(
                 rng[k] = s.range as f32;
                 let vals: Vec<f64> = match sensor.polarization {
                     None => (0..16).map(|e| s.mueller[e / 4][e % 4]).collect(),
-                    Some(st) => (0..4)
+                    Some(st) => (0..ch)
                         .map(|i| (0..4).map(|j| s.mueller[i][j] * st[j]).sum())
                         .collect(),
                 };

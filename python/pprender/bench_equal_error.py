@@ -1,0 +1,221 @@
+"""Equal-error comparison with Mitsuba 3: time to reach the same RMS error on a Stokes image.
+
+``python -m pprender.bench_equal_error [--write]`` (``--write``: docs/equal-error.md).
+
+Method
+------
+* Scenes both renderers model identically: a smooth-shaded sphere (radius 0.5 m) and the
+  3U CubeSat mesh without its whip antenna (flat faces; the antenna's specular line is
+  narrower than the reference's sub-pixels, so the reference would not be converged), one ``roughconductor`` material (Beckmann, alpha 0.2,
+  aluminium's eta at 1064 nm, Smith masking with Walter's G1, single bounce: pprender's
+  ``shadowing="smith", smith_g1="walter", terms=["single"]``), monostatic, unpolarized
+  transmitter, orthographic view of the bounding square at 128 x 128 pixels.
+* The truth: pprender's exact f64 reference (``quality="reference"``, core BRDF, exact ray
+  casting) at 8 x 8 sub-pixels per pixel, summed: the area-integrated pixel values, which
+  is what Mitsuba's box pixel filter converges to (and what a pixel of a real camera is).
+* Error of an image: ``sqrt(mean((S0 - S0_ref)^2)) / mean(S0_ref)`` over the pixels covered
+  in either (S0 in m^2 per pixel; Mitsuba's radiance times ``4 pi delta^2``).
+* pprender: each quality setting, with supersampling 1, 2 and 4, at 128 x 128; time per
+  realization in a batch of 32 attitudes (best of ``repeats``) and for one attitude per
+  call. Mitsuba (``llvm_ad_mono_polarized``, ``stokes`` integrator over ``path`` with
+  ``max_depth`` 2, directional emitter, ``independent`` sampler): its error at 16 and 256
+  spp fitted by ``err^2 = bias^2 + c / spp``; the spp that reaches a target error
+  ``e`` is ``c / (e^2 - bias^2)`` (none if ``e <= bias``), timed when at most
+  ``max_spp`` and otherwise extrapolated linearly in spp from the timed runs (marked).
+  Mitsuba's kernel compilation is excluded (it is cached between runs of a scene).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import pprender
+
+RES = 128
+SS_REF = 8
+ALUMINIUM_1064 = 1.3763 + 10.2449j
+ALPHA = 0.2
+
+
+def _material() -> pprender.Material:
+    return pprender.Material("beckmann", alpha=ALPHA, eta=ALUMINIUM_1064, shadowing="smith",
+                             correlation="none", smith_g1="walter", terms=("single",))
+
+
+def _scenes() -> list[tuple[str, Any, bool]]:
+    from . import models
+
+    return [("sphere", models.sphere(radius=0.5, subdivisions=5), True),
+            ("3U CubeSat, no antenna", models.cubesat("3U", antenna=False), False)]
+
+
+def rms_error(img: np.ndarray, ref: np.ndarray) -> float:
+    """``sqrt(mean((img - ref)^2)) / mean(ref)`` over pixels covered in either image."""
+    cov = (img > 0) | (ref > 0)
+    return float(np.sqrt(np.mean((img[cov] - ref[cov]) ** 2)) / np.mean(ref[cov]))
+
+
+def _best(f: Any, repeats: int) -> float:
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def _mitsuba_scene(mesh: Any, ext: float, smooth: bool, d: str) -> Any:
+    from .bench import MitsubaBench
+
+    MitsubaBench._prepare_llvm()
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_mono_polarized")
+    path = os.path.join(d, "mesh.ply")
+    mesh.export(path)
+    return mi, mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
+        "sensor": {
+            "type": "orthographic",
+            "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 4 * ext], target=[0, 0, 0], up=[0, 1, 0])
+            @ mi.ScalarTransform4f.scale([ext, ext, 1.0]),
+            "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent"},
+        },
+        "emitter": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
+        "shape": {"type": "ply", "filename": path, "face_normals": not smooth,
+                  "bsdf": {"type": "roughconductor", "distribution": "beckmann", "alpha": ALPHA,
+                           "eta": ALUMINIUM_1064.real, "k": ALUMINIUM_1064.imag}},
+    })
+
+
+def measure(repeats: int = 3, batch: int = 32, max_spp: int = 4096, device: str = "auto") -> list[dict[str, Any]]:
+    out = []
+    mat = _material()
+    q1 = np.eye(3)[None]
+    for name, mesh, smooth in _scenes():
+        scene = pprender.Scene(mesh, mat, smooth=smooth)
+        ext = scene.radius
+        pix = 2 * ext / RES
+        t0 = time.perf_counter()
+        ref = pprender.render(scene, pprender.Lidar(quality="reference", resolution=RES, supersampling=SS_REF),
+                              q1, outputs=("mueller",))
+        t_ref = time.perf_counter() - t0
+        assert ref.mueller is not None
+        s0_ref = ref.mueller[0, ..., 0, 0].astype(np.float64)
+        rows: list[dict[str, Any]] = []
+        qb = np.repeat(q1, batch, axis=0)
+        for quality in ("fast", "balanced", "accurate"):
+            for ss in (1, 2, 4):
+                sensor = pprender.Lidar(quality=quality, resolution=RES, supersampling=ss, polarization=[1, 0, 0, 0])
+                r = pprender.render(scene, sensor, q1, outputs=("stokes",), device=device)
+                assert r.stokes is not None
+                err = rms_error(r.stokes[0, ..., 0].astype(np.float64), s0_ref)
+                t_batch = _best(lambda: pprender.render(scene, sensor, qb, outputs=("stokes",), device=device),
+                                repeats) / batch
+                t_one = _best(lambda: pprender.render(scene, sensor, q1, outputs=("stokes",), device=device), repeats)
+                rows.append({"quality": quality, "ss": ss, "err": err, "t_batch": t_batch, "t_one": t_one})
+        with tempfile.TemporaryDirectory() as d:
+            mi, msc = _mitsuba_scene(mesh, ext, smooth, d)
+
+            def s0(spp: int, seed: int) -> np.ndarray:
+                img = np.asarray(mi.render(msc, spp=spp, seed=seed))  # type: ignore[arg-type]
+                return img[..., 1].astype(np.float64) * 4 * math.pi * pix * pix
+
+            s0(4, 0)  # compile
+            timed = {}
+            errs = {}
+            for spp in (16, 256):
+                s0(spp, 1)  # this spp's kernel
+                timed[spp] = _best(lambda: s0(spp, 2), repeats)
+                errs[spp] = float(np.mean([rms_error(s0(spp, 10 + k), s0_ref) for k in range(3)]))
+            # err^2 = b^2 + c / spp from the two measurements
+            c = (errs[16] ** 2 - errs[256] ** 2) / (1 / 16 - 1 / 256)
+            b2 = max(errs[256] ** 2 - c / 256, 0.0)
+            per_spp = (timed[256] - timed[16]) / (256 - 16)
+            fixed = max(timed[16] - 16 * per_spp, 0.0)
+
+            def mitsuba_time(e: float) -> tuple[float, float, bool]:
+                if e * e <= b2 or c <= 0:
+                    return math.nan, math.nan, False
+                spp = max(1, math.ceil(c / (e * e - b2)))
+                if spp <= max_spp:
+                    s0(spp, 3)
+                    return spp, _best(lambda: s0(spp, 4), 1), False
+                return spp, fixed + per_spp * spp, True
+
+            targets = sorted({0.01} | {float(r["err"]) for r in rows}, reverse=True)
+            mt = {e: mitsuba_time(e) for e in targets}
+        out.append({"scene": name, "rows": rows, "ref_seconds": t_ref, "mitsuba_errs": errs,
+                    "bias": math.sqrt(b2), "c": c, "mitsuba": mt, "timed": timed})
+    return out
+
+
+def report(results: list[dict[str, Any]], batch: int) -> str:
+    info = pprender.device_info()
+    L = ["# Equal-error comparison with Mitsuba 3", "",
+         "Generated by `python -m pprender.bench_equal_error --write` (method in the module "
+         f"docstring). pprender on {info['name']}; Mitsuba 3 llvm_ad_mono_polarized on the same CPU, "
+         "same run. Error: RMS of S0 over covered pixels relative to the mean S0, against the "
+         f"exact f64 reference at {SS_REF}x{SS_REF} sub-pixels per pixel.", ""]
+    for res in results:
+        e16, e256 = res["mitsuba_errs"][16], res["mitsuba_errs"][256]
+        L += [f"## {res['scene']}", "",
+              f"Mitsuba: error {e16:.2e} at 16 spp ({1e3 * res['timed'][16]:.0f} ms), {e256:.2e} at 256 spp "
+              f"({1e3 * res['timed'][256]:.0f} ms); fitted bias {res['bias']:.1e}. Reference render "
+              f"{res['ref_seconds']:.1f} s.", "",
+              "| pprender setting | RMS error | ms / image (batch of %d) | ms (one per call) | Mitsuba spp for that error | Mitsuba ms | ratio (batch) | ratio (one per call) |" % batch,
+              "|---|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in res["rows"]:
+            spp, tm, extrap = res["mitsuba"][r["err"]]
+            mark = " (extrapolated)" if extrap else ""
+            if math.isnan(tm):
+                L.append(f"| {r['quality']}, ss {r['ss']} | {r['err']:.2e} | {1e3 * r['t_batch']:.2f} | "
+                         f"{1e3 * r['t_one']:.1f} | unreachable (below its bias) | - | - | - |")
+            else:
+                L.append(f"| {r['quality']}, ss {r['ss']} | {r['err']:.2e} | {1e3 * r['t_batch']:.2f} | "
+                         f"{1e3 * r['t_one']:.1f} | {spp:,}{mark} | {1e3 * tm:,.0f} | {tm / r['t_batch']:,.0f}x | "
+                         f"{tm / r['t_one']:,.0f}x |")
+        # the 1% level: the fastest pprender setting within 1%
+        ok = [r for r in res["rows"] if r["err"] <= 0.01]
+        spp, tm, extrap = res["mitsuba"][0.01]
+        if ok and not math.isnan(tm):
+            best = min(ok, key=lambda r: r["t_batch"])
+            L += ["", f"At 1% RMS: Mitsuba needs {spp:,} spp, {1e3 * tm:,.0f} ms"
+                  f"{' (extrapolated)' if extrap else ''}; the fastest pprender setting within 1% is "
+                  f"{best['quality']}, ss {best['ss']} ({100 * best['err']:.2f}%): {1e3 * best['t_batch']:.2f} ms "
+                  f"per image in a batch, {1e3 * best['t_one']:.1f} ms alone: **{tm / best['t_batch']:,.0f}x** "
+                  f"(batch), {tm / best['t_one']:,.0f}x (one per call)."]
+        else:
+            L += ["", "At 1% RMS: no pprender setting at this resolution reaches 1% (see the rows)."]
+        L.append("")
+    return "\n".join(L) + "\n"
+
+
+def main(argv: list[str] | None = None) -> str:
+    ap = argparse.ArgumentParser(prog="python -m pprender.bench_equal_error")
+    ap.add_argument("--write", action="store_true")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--batch", type=int, default=32)
+    ap.add_argument("--device", default="auto")
+    a = ap.parse_args(argv)
+    text = report(measure(repeats=a.repeats, batch=a.batch, device=a.device), a.batch)
+    print(text)
+    if a.write:
+        path = Path(__file__).resolve().parents[2] / "docs" / "equal-error.md"
+        path.write_text(text)
+        print(f"wrote {path}")
+    return text
+
+
+if __name__ == "__main__":
+    main()
