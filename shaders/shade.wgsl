@@ -536,11 +536,15 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
             let hi = (r0 + half_w - params.r_min) / params.bin_width;
             let k0 = u32(clamp(floor(lo), 0.0, f32(params.n_bins - 1u)));
             let k1 = u32(clamp(floor(hi), 0.0, f32(params.n_bins - 1u)));
-            var c_prev = pulse_cdf_gauss_box2(params.r_min + f32(k0) * params.bin_width - r0,
-                                              params.sigma, wa, wb);
+            // the pulse's tails beyond the support fold into the end bins (weights sum to 1;
+            // twin: render::pulse::bin_weights_folded)
+            var c_prev = 0.0;
             for (var kb = k0; kb <= k1; kb++) {
-                let c_next = pulse_cdf_gauss_box2(params.r_min + f32(kb + 1u) * params.bin_width - r0,
+                var c_next = 1.0;
+                if (kb < k1) {
+                    c_next = pulse_cdf_gauss_box2(params.r_min + f32(kb + 1u) * params.bin_width - r0,
                                                   params.sigma, wa, wb);
+                }
                 let w = (c_next - c_prev) * params.fix_scale;
                 c_prev = c_next;
                 if (w != 0.0) {

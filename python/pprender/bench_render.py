@@ -166,13 +166,22 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
         ("profile only (Stokes), sampled pulse: host accumulation", pprender.Lidar(
             resolution=RES, polarization=[1, 1, 0, 0], pulse_samples=SAMPLED_PULSE, pulse_sample_spacing=5e-12,
         ), ("profile",)),
+        ("profile only, intensity of an unpolarized transmitter (M00 alone)", pprender.Lidar(
+            resolution=RES, polarization=[1, 0, 0, 0], intensity_only=True), ("profile",)),
+    ]
+    # what the model's terms cost: the same request with single-bounce-only materials
+    single_only = cubesat_scene(terms=("single",))
+    single_only.prepare(0.0)
+    special = [
+        ("profile only (Stokes), single bounce only", pprender.Lidar(resolution=RES, polarization=[1, 1, 0, 0]),
+         ("profile",)),
     ]
     t0 = time.perf_counter()
     pprender.render(scene, cases[0][1], q[:1], outputs=cases[0][2], device=device)
     first_call = time.perf_counter() - t0
-    for label, sensor, outs in cases:
-        pprender.render(scene, sensor, q[:2], outputs=outs, device=device)  # pipeline variant
-        best, med = best_time(lambda: pprender.render(scene, sensor, q, outputs=outs, device=device), repeats)
+    for sc, label, sensor, outs in [(scene, *c) for c in cases] + [(single_only, *c) for c in special]:
+        pprender.render(sc, sensor, q[:2], outputs=outs, device=device)  # pipeline variant
+        best, med = best_time(lambda: pprender.render(sc, sensor, q, outputs=outs, device=device), repeats)
         rows.append((label, batch / best, batch / med))
     # single-attitude calls (latency)
     best1, _ = best_time(lambda: pprender.render(scene, cases[1][1], q[:1], outputs=("profile",), device=device), repeats)

@@ -577,8 +577,10 @@ impl SensorSetup {
     }
 }
 
-/// The pulse support in standard deviations (weights beyond it are below 1e-9).
-pub const PULSE_SUPPORT_SIGMAS: f64 = 6.0;
+/// The pulse support in standard deviations: a pixel adds to the bins within it of its
+/// footprint, the Gaussian's tails beyond (2.9e-7 of its value on each side) folded into
+/// the end bins ([`crate::render::pulse::bin_weights_folded`]), so profiles sum exactly.
+pub const PULSE_SUPPORT_SIGMAS: f64 = 5.0;
 
 /// Results of one batch, row-major arrays.
 #[derive(Debug, Clone)]

@@ -264,6 +264,39 @@ pub fn bin_weights_f64(r0: f64, a: f64, b: f64, sigma: f64, edges: &[f64], out: 
     }
 }
 
+/// The renderer's bin weights of one pixel (the rule of `shaders/shade.wgsl`): only the
+/// bins `k0..=k1` that `[r0 - half_w, r0 + half_w]` reaches get weight (`half_w` = the
+/// pulse support plus half the footprint), and the pulse's tails beyond them are folded
+/// into the end bins (the first bin's weight is `C(e_{k0+1} - r0)`, the last's
+/// `1 - C(e_{k1} - r0)`), so the weights sum to exactly 1: a pixel's profile sums to its
+/// value whatever the support. `edges` are `r_min + k bin_width`.
+pub fn bin_weights_folded(
+    r0: f64,
+    a: f64,
+    b: f64,
+    sigma: f64,
+    half_w: f64,
+    edges: &[f64],
+    out: &mut [f64],
+) {
+    assert_eq!(out.len() + 1, edges.len(), "need one more edge than bins");
+    let nb = out.len();
+    let (r_min, bw) = (edges[0], edges[1] - edges[0]);
+    let bin = |r: f64| (((r - r_min) / bw).floor().clamp(0.0, (nb - 1) as f64)) as usize;
+    let (k0, k1) = (bin(r0 - half_w), bin(r0 + half_w));
+    out.iter_mut().for_each(|o| *o = 0.0);
+    let mut prev = 0.0;
+    for k in k0..=k1 {
+        let c = if k < k1 {
+            cdf_gauss_box2(edges[k + 1] - r0, sigma, a, b)
+        } else {
+            1.0
+        };
+        out[k] = c - prev;
+        prev = c;
+    }
+}
+
 // ---------------------------------------------------------------------------------------
 // f32 twin (the formulas of shaders/pulse.wgsl)
 // ---------------------------------------------------------------------------------------
@@ -770,6 +803,33 @@ mod tests {
     use crate::quad::integrate;
 
     const GL: usize = 16;
+
+    #[test]
+    fn folded_weights_sum_to_one_and_equal_the_full_ones_inside() {
+        let (sigma, bw) = (6.37e-3, 3.75e-3);
+        let edges: Vec<f64> = (0..=80).map(|k| -0.15 + k as f64 * bw).collect();
+        let mut full = vec![0.0; 80];
+        let mut fold = vec![0.0; 80];
+        for &(r0, a, b) in &[(0.0013, 1e-3, 4e-4), (-0.05, 8e-3, 2e-3), (0.031, 0.0, 0.0)] {
+            let half_w = 5.0 * sigma + 0.5 * (a + b);
+            bin_weights_f64(r0, a, b, sigma, &edges, &mut full);
+            bin_weights_folded(r0, a, b, sigma, half_w, &edges, &mut fold);
+            let s: f64 = fold.iter().sum();
+            assert!((s - 1.0).abs() < 1e-15, "{s}");
+            let nz: Vec<usize> = (0..80).filter(|&k| fold[k] != 0.0).collect();
+            let (k0, k1) = (nz[0], *nz.last().unwrap());
+            // interior bins: the same weights; end bins: plus the folded tail, which is the
+            // Gaussian's mass beyond 5 sigma (2.87e-7) up to the bin's rounding
+            for k in k0 + 1..k1 {
+                assert!((fold[k] - full[k]).abs() < 1e-15);
+            }
+            let lo: f64 = full[..=k0].iter().sum();
+            let hi: f64 = full[k1..].iter().sum();
+            assert!((fold[k0] - lo).abs() < 1e-15 && (fold[k1] - hi).abs() < 1e-15);
+            let tail: f64 = full[..k0].iter().sum();
+            assert!(tail < 2.9e-7, "{tail}");
+        }
+    }
 
     /// Integral of `f` over [lo, hi] split at the given points (those inside), GL on each piece.
     fn split_integral(lo: f64, hi: f64, splits: &[f64], f: impl Fn(f64) -> f64) -> f64 {

@@ -327,11 +327,12 @@ pub fn render_cpu(
                         Some(p) => {
                             p.bin_weights(s.range, s.widths.0, s.widths.1, &edges, &mut weights)
                         }
-                        None => pulse::bin_weights_f64(
+                        None => pulse::bin_weights_folded(
                             s.range,
                             s.widths.0,
                             s.widths.1,
                             sensor.sigma_range,
+                            lay.support + 0.5 * (s.widths.0 + s.widths.1),
                             &edges,
                             &mut weights,
                         ),
