@@ -264,3 +264,38 @@ def test_bad_inputs(setup) -> None:
     half["complete"] = half["complete"].copy(data=np.zeros(half["complete"].shape, dtype=bool))
     with pytest.raises(pp.Error, match="incomplete"):
         Classifier(half)
+
+
+def test_a_measurement_object_is_registered_on_the_database_grid(tiny_db_for_measurement):
+    """A Measurement of a shape rendered on its own (smaller) range window is placed on the
+    database's grid and, noise-free and background-free, scores its own candidate 1."""
+    ds, scene, sensor, q, index = tiny_db_for_measurement
+    truth = pp.render(scene, sensor, q, outputs=("profile",))
+    inst = pp.Instrument(pulse_energy=1.0, target_range=1e5, channels="co_cross_linear",
+                               background_rate=1e6)
+    meas = pp.measure(truth, inst, seed=3)
+    clf = pp.Classifier(ds, projection=co_cross_projection())
+    # exact expectation (signal only): the candidate scores 1 to rounding
+    import dataclasses
+    exact = dataclasses.replace(meas, counts=meas.signal + meas.background)
+    s = clf.scores(exact)
+    assert int(np.argmax(s[0])) == index and s[0, index] > 1 - 1e-9
+    # Poisson counts: still the best match
+    assert int(clf.top_k(meas, k=1).index[0, 0]) == index
+    with pytest.raises(pp.Error, match="grid"):
+        clf.scores(dataclasses.replace(meas, bin_edges=meas.bin_edges + 0.3 * (meas.bin_edges[1] - meas.bin_edges[0])))
+
+
+@pytest.fixture(scope="module")
+def tiny_db_for_measurement(tmp_path_factory):
+    from pprender import so3
+
+    sensor = pp.Lidar(resolution=32)
+    shapes = {"cone": models.cone(radius=0.15, height=0.4), "plate": models.plate(width=0.5, height=0.3)}
+    mats = {"paint": "white_paint"}
+    att = so3.grid(12)
+    ds = pp.build_database(tmp_path_factory.mktemp("m") / "db.zarr", shapes, mats, att, sensor,
+                                 progress=False)
+    scene = pp.Scene(shapes["cone"], "white_paint")
+    # candidate index of (cone, paint, attitude 5): shapes x materials x attitudes order
+    return ds, scene, sensor, att[5:6], 5

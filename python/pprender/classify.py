@@ -349,7 +349,35 @@ class Classifier:
     def n_candidates(self) -> int:
         return int(self.features.shape[0])
 
+    def _registered(self, m: Any) -> np.ndarray:
+        """A :class:`pprender.Measurement`'s background-subtracted counts placed on the
+        database's range grid (its bins must have the database's width and lie on the same
+        grid of multiples of it: those of :func:`pprender.render`)."""
+        if self.range is None:
+            raise Error("invalid measurements: a Measurement needs a classifier built from a database "
+                        "(its range grid); pass (M, B, C) arrays otherwise")
+        counts = np.asarray(m.counts, dtype=np.float64) - np.asarray(m.background, dtype=np.float64)
+        edges = np.asarray(m.bin_edges, dtype=np.float64)
+        w = float(self.range[1] - self.range[0])
+        lo = float(self.range[0] - 0.5 * w)
+        nb = counts.shape[-2]
+        start = (edges[0] - lo) / w
+        k = int(round(start))
+        if (abs(start - k) > 1e-6 or edges.shape != (nb + 1,)
+                or abs((edges[-1] - edges[0]) / nb - w) > 1e-9 * w):
+            raise Error(f"invalid measurements: bin edges {edges[0]:.6g}..{edges[-1]:.6g} m ({nb} bins) are "
+                        f"not on the database's grid of {w:.6g} m bins starting at {lo:.6g} m")
+        B = len(self.range)
+        out = np.zeros(counts.shape[:-2] + (B, counts.shape[-1]))
+        a, b = max(k, 0), min(k + nb, B)
+        if a >= b:
+            raise Error("invalid measurements: no bin inside the database's range window")
+        out[..., a:b, :] = counts[..., a - k:b - k, :]
+        return out
+
     def _measurements(self, measurements: Any) -> tuple[np.ndarray, bool]:
+        if hasattr(measurements, "counts") and hasattr(measurements, "bin_edges"):
+            measurements = self._registered(measurements)
         x = _finite_array(measurements, "measurements")
         single = x.ndim == 2
         if single:
@@ -398,8 +426,10 @@ class Classifier:
 
         Parameters
         ----------
-        measurements : array_like
-            (M, B, C) or (B, C) profiles in the candidates' channels and range grid.
+        measurements : array_like or pprender.Measurement
+            (M, B, C) or (B, C) profiles in the candidates' channels and range grid, or a
+            :class:`pprender.Measurement` (its counts less the expected background, placed on
+            the database's range grid; the classifier must come from a database).
         return_offsets : bool
             Also return the best range offset (bins) per pair.
 
