@@ -33,26 +33,24 @@ Experiment (all seeded; SI units), once per material pair (:data:`PAIRS`):
   the co/cross profile against every candidate, range offsets of up to ``max_shift`` bins
   searched; the best candidate gives shape, material and attitude.
 
-Attitude error, modulo what the measurement can see (``aspect_error``). A monostatic
-range profile's intensity is unchanged by any roll about the line of sight (it is the
-range histogram of a rotated image), and the co/cross channels are unchanged by a quarter
-turn about it (monostatic returns have no diattenuation or polarizance, so co and cross
-are ``(M00 +- M11) / 2``, which a quarter turn keeps); other rolls change co/cross only
-through the target's polarization, weakly (1 - cosine of 4e-5 to 6e-3 for a 30 degree
-roll of the black-paint plate and cone; tests/test_classification_snr.py). So we score
-the *aspect*: the line of sight in the body frame, ``u = R^T Z``, and report the angle
-between the true and estimated ``u``, minimized over the shape's own symmetries: for the
-cone (axisymmetric) the difference of the tilts of its axis against the line of sight;
-for the boxes (plate, bus) the minimum over their rotation group (4 and 8 rotations) and over ``u -> -u``,
-because a centrally symmetric body seen from the opposite side gives the same co/cross
-profile (exactly: a half turn about a transverse axis maps the image to its mirror image,
-which has the same range histogram and the same ``M00 +- M11``). This equals the SO(3)
-distance minimized over rolls about the line of sight and over those symmetries. The
-second attitude column, ``so3_error``, is the SO(3) distance minimized over the *exact*
-invariances only (quarter turns about the line of sight, the body symmetries, the opposite
-side for centrally symmetric bodies): it includes the roll, which the co/cross profile
-constrains only weakly, so it is large unless the SNR is high. Attitude errors are
-medians over the measurements whose shape was identified correctly.
+Attitude error, modulo what the measurement can see (:func:`aspect_error`). Monostatic,
+each pixel's Mueller matrix is ``M00 diag(1, d, -d, -d)`` in the telescope bases (a mirror-like
+single reflection from facets met at normal incidence plus depolarized multiple and diffuse
+scattering; the double-bounce term, not used here, would add more), and rotating the Stokes
+bases leaves that form unchanged. So a roll about the line of sight only rotates the image,
+and the range profile, a histogram of the image over range, is unchanged: exactly for
+quarter turns (the pixel grid maps onto itself) and to rasterization error otherwise
+(1 - cosine of 4e-5 to 6e-3 at resolution 48 for a 30 degree roll of the black-paint
+plate and cone, 8 to 300 times less at 192; tests/test_classification_snr.py). What the
+profile can determine is the *aspect*: the line of sight in the body frame, ``u = R^T Z``.
+We report the angle between the true and estimated ``u``, minimized over the shape's own
+symmetries: for the cone (axisymmetric) the difference of the tilts of its axis against
+the line of sight; for the boxes (plate, bus) the minimum over their rotation groups (4 and 8 rotations) and over ``u -> -u``,
+because a centrally symmetric body seen from the opposite side gives the same profile (a
+half turn about a transverse axis maps the image of the body to its mirror image, with the
+same range histogram and the same ``d``). This equals the SO(3) distance minimized over
+rolls about the line of sight and over those symmetries. Attitude errors are given for the
+measurements whose shape was identified correctly.
 """
 
 from __future__ import annotations
@@ -165,28 +163,6 @@ def aspect_error(info: ShapeInfo, q_true: np.ndarray, q_est: np.ndarray) -> np.n
     return _angle(dots.max(axis=1))
 
 
-def so3_error(info: ShapeInfo, q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:
-    """SO(3) distance (rad) minimized over the exact invariances of a monostatic co/cross
-    profile: left quarter turns about the line of sight (and, for centrally symmetric
-    bodies, those composed with a half turn about X), right body symmetries. (M,)."""
-    r1, r2 = _matrices(q_true), _matrices(q_est)
-    left = [Rotation.from_rotvec([0.0, 0.0, k * math.pi / 2]).as_matrix() for k in range(4)]
-    if info.central:
-        hx = np.diag([1.0, -1.0, -1.0])
-        left += [hx @ m for m in left]
-    best = np.full(len(r1), -np.inf)  # largest trace of R_est^T L R_true S
-    for lm in left:
-        a = np.einsum("mji,jk,mkl->mil", r2, lm, r1)  # R_est^T L R_true
-        if info.axisymmetric:
-            # max over a spin psi about body z of trace(A Rz(psi))
-            tr = a[:, 2, 2] + np.hypot(a[:, 0, 0] + a[:, 1, 1], a[:, 0, 1] - a[:, 1, 0])
-        else:
-            assert info.group is not None
-            tr = np.einsum("mij,kji->mk", a, info.group).max(axis=1)
-        best = np.maximum(best, tr)
-    return _angle((best - 1.0) / 2.0)
-
-
 def face_on_angle(info: ShapeInfo, q: np.ndarray) -> np.ndarray:
     """Angle (rad) between the line of sight and the normal of the flat face closest to
     facing the sensor: the cone's base (its only flat face), a box's faces. (M,)."""
@@ -271,7 +247,7 @@ def run(cfg: Config, ds: Any, held: dict[str, Any] | None = None) -> dict[str, A
     rng = np.random.default_rng(cfg.seed)
     rows: list[dict[str, Any]] = []
     for snr in cfg.snrs:
-        shape_ok, mat_ok, asp, so3e, measured_snr, pred_s, pred_m = [], [], [], [], [], [], []
+        shape_ok, mat_ok, asp, measured_snr, pred_s, pred_m = [], [], [], [], [], []
         for _ in range(cfg.n_noise):
             meas = noisy(cfg, held["profile"], edges, snr, rng)
             measured_snr.append(meas.snr)
@@ -284,17 +260,14 @@ def run(cfg: Config, ds: Any, held: dict[str, Any] | None = None) -> dict[str, A
             pred_m.append(m_hat)
             shape_ok.append(ok)
             mat_ok.append(m_hat == held["material"])
-            a = np.full(len(ok), np.nan)
-            e = np.full(len(ok), np.nan)
+            a = np.full(len(ok), np.nan)  # NaN where the shape is wrong
             for s in info:
                 sel = ok & (held["shape"] == s)
                 if sel.any():
                     a[sel] = aspect_error(info[s], held["quaternion"][sel], q_hat[sel])
-                    e[sel] = so3_error(info[s], held["quaternion"][sel], q_hat[sel])
             asp.append(a)
-            so3e.append(e)
         shape_ok_a, mat_ok_a = np.concatenate(shape_ok), np.concatenate(mat_ok)
-        asp_a, so3_a = np.concatenate(asp), np.concatenate(so3e)
+        asp_a = np.concatenate(asp)
         right = np.isfinite(asp_a)
 
         def stat(f: Any, a: np.ndarray) -> float:
@@ -309,12 +282,10 @@ def run(cfg: Config, ds: Any, held: dict[str, Any] | None = None) -> dict[str, A
             "joint_accuracy": float((shape_ok_a & mat_ok_a).mean()),
             "aspect_median": stat(np.median, asp_a),
             "aspect_p90": stat(lambda a: np.percentile(a, 90), asp_a),
-            "so3_median": stat(np.median, so3_a),
             # per measurement (n_noise draws of every held-out profile, draw-major)
             "shape_ok": shape_ok_a,
             "material_ok": mat_ok_a,
             "aspect_error": asp_a,
-            "so3_error": so3_a,
             "predicted_shape": np.concatenate(pred_s),
             "predicted_material": np.concatenate(pred_m),
         })
@@ -349,13 +320,13 @@ def _table(cfg: Config, res: dict[str, Any]) -> list[str]:
         f"{cfg.n_noise * res['n_measurements']} measurements per row.",
         "",
         "| SNR | shape accuracy | material accuracy | shape and material | median aspect error (deg) "
-        "| 90th pct aspect error (deg) | median SO(3) error (deg) |",
-        "|---:|---:|---:|---:|---:|---:|---:|",
+        "| 90th pct aspect error (deg) |",
+        "|---:|---:|---:|---:|---:|---:|",
     ]
     for r in res["rows"]:
         lines.append(
             f"| {r['snr']:g} | {r['shape_accuracy']:.3f} | {r['material_accuracy']:.3f} | {r['joint_accuracy']:.3f} "
-            f"| {r['aspect_median'] * deg:.1f} | {r['aspect_p90'] * deg:.1f} | {r['so3_median'] * deg:.1f} |"
+            f"| {r['aspect_median'] * deg:.1f} | {r['aspect_p90'] * deg:.1f} |"
         )
     top = res["rows"][-1]
     lines += ["", f"Errors left at SNR {top['snr']:g} ({len(res['residual'])} of {top['n']}), with the angle "
@@ -395,15 +366,14 @@ def markdown(runs: list[tuple[Config, dict[str, Any]]], seconds: float, command:
         "SNR = S / sqrt(S + B), S and B summed over bins and channels; Poisson noise by `pprender.measure`.",
         f"- Classifier: `pprender.Classifier`, plain cosine score of the co/cross profile, range offsets of up "
         f"to {cfg.max_shift} bins searched; the best candidate gives shape, material and attitude.",
-        "- Attitude errors, modulo what the measurement can see. Aspect error: the angle between the true and "
-        "estimated line of sight in the body frame, minimized over the shape's symmetries (cone: the tilt of "
-        "its axis; plate and bus: their rotation groups and the opposite side, which gives the same co/cross "
-        "profile for a centrally symmetric body); it ignores the roll about the line of sight, which leaves "
-        "the intensity profile unchanged and changes co/cross only through the target's polarization. SO(3) "
-        "error: the rotation angle minimized over the exact invariances only (quarter turns about the line of "
-        "sight, the body symmetries, the opposite side), so it includes the roll. Both are medians over the "
-        "measurements whose shape was right. The grid's covering radius in SO(3) is "
-        f"{res['covering_radius'] * deg:.1f} deg.",
+        "- Attitude error, modulo what the measurement can see: a monostatic profile is unchanged by any roll "
+        "about the line of sight (each pixel's Mueller matrix is M00 diag(1, d, -d, -d), which the roll leaves "
+        "as it is; the roll only rotates the image), so the profile determines the aspect, the line of sight in "
+        "the body frame. Aspect error: the angle between the true and estimated line of sight in the body "
+        "frame, minimized over the shape's symmetries (cone: the tilt of its axis; plate and bus: their "
+        "rotation groups and the opposite side, which a centrally symmetric body presents identically). "
+        "Statistics over the measurements whose shape was right. The grid's covering radius in SO(3) is "
+        f"{res['covering_radius'] * deg:.1f} deg (an upper bound on the aspect spacing).",
         "",
     ]
     for c, r in runs:
