@@ -45,9 +45,9 @@ plate and cone, 8 to 300 times less at 192; tests/test_classification_snr.py). W
 profile can determine is the *aspect*: the line of sight in the body frame, ``u = R^T Z``.
 We report the angle between the true and estimated ``u``, minimized over the shape's own
 symmetries: for the cone (axisymmetric) the difference of the tilts of its axis against
-the line of sight; for the boxes (plate, bus) the minimum over their rotation groups (4 and 8 rotations) and over ``u -> -u``,
-because a centrally symmetric body seen from the opposite side gives the same profile (a
-half turn about a transverse axis maps the image of the body to its mirror image, with the
+the line of sight; for the boxes (plate, bus) the minimum over their rotation groups (4
+and 8 rotations) and over ``u -> -u``, because a centrally symmetric body seen from the
+opposite side gives the same profile (a half turn about a transverse axis maps the image of the body to its mirror image, with the
 same range histogram and the same ``d``). This equals the SO(3) distance minimized over
 rolls about the line of sight and over those symmetries. Attitude errors are given for the
 measurements whose shape was identified correctly.
