@@ -26,6 +26,8 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 EXPECTED = [
     "01_quickstart",
     "02_signatures",
+    "03_classification",
+    "04_fitting",
 ]
 
 
