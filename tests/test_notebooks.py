@@ -28,6 +28,7 @@ EXPECTED = [
     "02_signatures",
     "03_classification",
     "04_fitting",
+    "05_speed_vs_accuracy",
 ]
 
 
