@@ -35,7 +35,7 @@ impl MonostaticTable {
     pub fn build(mat: &Material, nodes: usize, double_order: usize) -> Self {
         let mut m = mat.clone();
         m.spec.double_order = double_order;
-        let scale = mat.spec.distribution.scale();
+        let scale = mat.spec.distribution.table_scale();
         let values: Vec<Mat4> = (0..=nodes)
             .into_par_iter()
             .map(|i| {
@@ -363,12 +363,13 @@ pub const DEFAULT_DOUBLE_ORDER: usize = 48;
 /// `scale = 1/sqrt(alpha)`, which balances the node density near normal incidence
 /// (`dtheta = dz / scale`, the lobe has width `alpha`) against that near grazing
 /// (`dtheta = scale dz`); the multiple + diffuse terms on the grid of the material's own
-/// albedo tables (`scale = alpha`, 256 intervals: the nodes coincide with theirs); the
+/// albedo tables (`scale = min(alpha, 1)`, 256 intervals: the nodes coincide with theirs); the
 /// double bounce, which is smooth, on a coarse grid.
 pub fn default_grid(kind: PartKind, alpha: f64, _beta: f64) -> (usize, usize, f64) {
     match kind {
         PartKind::Single => (256, 32, 1.0 / alpha.sqrt()),
-        PartKind::Lambertian => (256, 8, alpha),
+        // the material's table scale (`Distribution::table_scale`)
+        PartKind::Lambertian => (256, 8, alpha.min(1.0)),
         PartKind::Double(_) => (32, 8, 1.0),
     }
 }
