@@ -158,7 +158,9 @@ fn psi_row(k: i32, n_psi: u32) -> vec2<u32> {
 }
 
 // Adds part `p` of material `m` at (z, psi) to acc (Mueller, row-major).
-fn add_part(m: u32, p: u32, z: f32, psi: f32, acc: ptr<function, array<f32, 16>>) {
+// Adds part `p` times `w` (cos(theta_i), or cos(theta_i) / cos(theta) for a part whose
+// nodes hold M cos(theta): negative scale in the header).
+fn add_part(m: u32, p: u32, z: f32, psi: f32, w: f32, acc: ptr<function, array<f32, 16>>) {
     let h = m * HEADER_WORDS + p * 4u;
     let base = bitcast<u32>(tables[h]);
     let n_z = bitcast<u32>(tables[h + 1u]);
@@ -201,7 +203,7 @@ fn add_part(m: u32, p: u32, z: f32, psi: f32, acc: ptr<function, array<f32, 16>>
             vals[e] = v;
         }
     }
-    let m00 = exp(max(vals[0], LN_FLOOR_F32));
+    let m00 = exp(max(vals[0], LN_FLOOR_F32)) * w;
     (*acc)[0] += m00;
     for (var e = 1u; e < 16u; e++) {
         if (((ELEMENT_MASK >> e) & 1u) != 0u) {
@@ -455,9 +457,12 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                     // z of the table grid: cot theta = s z / (1 - z)  =>  z = cos / (s sin + cos)
                     var m: array<f32, 16>;
                     for (var part = 0u; part < MAX_PARTS; part++) {
-                        let scale = tables[mat * HEADER_WORDS + part * 4u + 3u];
+                        let sw = tables[mat * HEADER_WORDS + part * 4u + 3u];
+                        let scale = abs(sw);
                         let z = cos_t / max(scale * sin_t + cos_t, 1e-30);
-                        add_part(mat, part, z, psi, &m);
+                        // cos_i / cos_t <= 2 cos(beta/2) while lit (1 at beta = 0)
+                        let w = select(cos_i, min(cos_i / max(cos_t, 1e-30), 2.0), sw < 0.0);
+                        add_part(mat, part, z, psi, w, &m);
                     }
                     if (mirrored) {
                         for (var e = 1u; e < 16u; e++) {
@@ -488,7 +493,8 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                         tmp[i * 4u + 2u] = a1 * ai.y + a2 * ai.x;
                         tmp[i * 4u + 3u] = m[i * 4u + 3u];
                     }
-                    let k = 4.0 * PI * cos_i * params.pix * params.pix;
+                    // (cos_i is in each part's weight, add_part)
+                    let k = 4.0 * PI * params.pix * params.pix;
                     for (var j = 0u; j < 4u; j++) {
                         let b1 = tmp[4u + j];
                         let b2 = tmp[8u + j];

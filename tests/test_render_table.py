@@ -73,11 +73,14 @@ def test_table_api(metal: pprender.Material) -> None:
     arrays = table.arrays()
     assert [(a[1], a[2], a[3].shape) for a in arrays][0] == (16, 4, (5, 17, 16))
     assert arrays[2][3].shape == (3, 9, 16)
-    # nodes hold ln M00 and M_ij / M00: the matrix at a node is exp(v0) [1, v1..v15]
+    # nodes hold ln M00 and M_ij / M00: the matrix at a node is exp(v0) [1, v1..v15], over
+    # cos(theta) for the single term with correlated masking (its nodes hold M cos(theta))
+    assert table.cos_weighted == [True, False, False]
     scale, n_z, n_psi, data = arrays[0]
     theta = math.atan2(1 - 0.5, scale * 0.5)
     m = table.eval(theta, math.pi / 2)
-    v = sum(np.exp(a[3][a[2] // 2 if a[2] else 0, a[1] // 2, 0]) for a in arrays)
+    v = sum(np.exp(a[3][a[2] // 2 if a[2] else 0, a[1] // 2, 0]) / (math.cos(theta) if w else 1.0)
+            for a, w in zip(arrays, table.cos_weighted))
     assert abs(m[0, 0] - v) < 1e-12 * v
     # mirror relation
     d = np.diag([1.0, 1.0, -1.0, -1.0])

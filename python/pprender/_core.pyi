@@ -23,15 +23,20 @@ class Material:
     distribution: "blinn_phong" (roughness exponent ``m`` in [0, 1e10]; m = 0 is
         Lambertian-like, m -> inf a mirror), "beckmann" or "ggx" (``alpha`` in
         [1e-5, 10]). Giving ``m`` to Beckmann/GGX or ``alpha`` to Blinn-Phong converts
-        with alpha = sqrt(2/(m+2)).
-    eta: complex index n + ik of the surface (n > 0, k >= 0); ``eta=inf`` is a perfect
-        conductor (rs = -1, rp = 1: F = 1, the white-furnace material).
+        with alpha = sqrt(2/(m+2)) (so Blinn-Phong takes ``alpha`` in [1.414214e-5, 1]).
+    eta: complex index n + ik of the surface (n > 0, k >= 0, ``|eta| <= 1e10``);
+        ``eta=inf`` is a perfect conductor (rs = -1, rp = 1: F = 1, the white-furnace
+        material).
     shadowing: "aps" (Ashikhmin-Premoze-Shirley P(k), seed eq. 6-7), "smith"
         (Smith G1 product) or "none" (single term only).
     correlation: f(phi) of seed eq. 6: "seed" (cos(phi/2)), "aps" (exp(-7.3 phi^2)) or
         "none"; default "seed" for APS and "none" for Smith.
     smith_g1: "exact" or "walter" (Walter et al. 2007 rational approximation, as in
-        Mitsuba 3) for the Beckmann/Blinn-Phong Smith G1.
+        Mitsuba 3) for the Beckmann/Blinn-Phong Smith G1. For Blinn-Phong "exact" is the
+        Smith function of the Blinn-Phong distribution itself (Lambda = N_D / cos, the
+        uncorrelated APS masking) and "walter" Walter et al.'s recipe through Beckmann
+        with alpha = sqrt(2/(m+2)), which is not energy conserving below m ~ 20
+        (white-furnace albedo 1.34 at grazing for m = 0).
     masking: how the APS masking integral is evaluated: "table" (per-material cubic
         table, error below 1e-8), "exact" (quadrature at each call) or "seed" (the seed's
         closed form, Blinn-Phong only; error in docs/seed-approximation.md).
@@ -216,6 +221,8 @@ class BrdfTable:
     def frame(self) -> str: ...
     @property
     def kinds(self) -> list[str]: ...
+    @property
+    def cos_weighted(self) -> list[bool]: ...
     def arrays(self) -> list[tuple[float, int, int, npt.NDArray[np.float64]]]: ...
 
 def brdf_table(

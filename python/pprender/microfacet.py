@@ -187,8 +187,9 @@ def smith_g1(
     """Smith masking ``G1 = 1 / (1 + Lambda)`` (Walter et al. 2007), radians.
 
     ``distribution`` ``"beckmann"`` or ``"ggx"`` with ``alpha``, or ``"blinn_phong"`` with
-    ``m`` (through Beckmann with ``alpha = sqrt(2/(m+2))``). ``variant``: ``"exact"``
-    (erfc form) or ``"walter"`` (the rational approximation Mitsuba 3 uses); GGX is exact
-    either way.
+    ``m``. ``variant``: ``"exact"`` (Beckmann: the erfc form; Blinn-Phong: the Smith
+    function of the Blinn-Phong distribution itself, ``Lambda = N_D / cos``, equal to
+    :func:`aps_masking`) or ``"walter"`` (the rational approximation Mitsuba 3 uses;
+    Blinn-Phong through Beckmann with ``alpha = sqrt(2/(m+2))``); GGX is exact either way.
     """
     return _out(_core.smith_g1(theta_k, distribution, m, alpha, variant))

@@ -14,11 +14,19 @@
 //! (from `wo.z = R cos(2 theta_h - delta)`), so for each `phi_h` node the `u` integral
 //! runs over `[0, u(theta_b(phi))]` where the integrand is continuous: Gauss-Legendre of
 //! order `n` in both variables converges without seeing the horizon as a jump.
+//!
+//! With the Fresnel factor and `0 < Re(eta^2) < 1` (an index below 1 with little
+//! absorption), `F(wi.h)` has a (pseudo-)critical angle where `sin^2 = Re(eta^2)`: a kink
+//! (`k = 0`) or a feature narrower than any rule. The `w` range is split there too (for
+//! eta = 0.01, alpha = 0.1 the order-128 albedo erred by 4e-4 at normal incidence), and
+//! the `phi` range where that curve turns (`R(phi) = cos theta_c`), with the panels' ends
+//! there mapped by `phi = phi* + L t^2` (the `theta` integral varies like a root of
+//! `phi - phi*` there; 6e-5 error for eta = 0.9 at order 128 without it).
 
 use super::material::Material;
 use super::single::masking_over_cosines;
 use crate::optics::frames::reflect;
-use crate::optics::fresnel::reflectance;
+use crate::optics::fresnel::{reflectance, Eta};
 use std::f64::consts::{FRAC_PI_4, PI};
 
 /// Single-bounce albedo for incidence cosine `cos_i`, with the material's Fresnel
@@ -32,9 +40,53 @@ pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64
     let wi = [si, 0.0, ci];
     let dist = mat.spec.distribution;
     let rule = crate::quad::gauss_legendre(n);
+    // cos of the facet incidence at the (pseudo-)critical angle, if there is one
+    let crit = match mat.spec.eta {
+        Eta::Complex(e) if fresnel => {
+            let re = (e * e).re;
+            (re > 0.0 && re < 1.0).then(|| (1.0 - re).sqrt())
+        }
+        _ => None,
+    };
+    let mut bps: Vec<f64> = Vec::with_capacity(6);
+    // phi panels: [0, pi] split where R(phi) = sqrt(si^2 cos^2 phi + ci^2) = cc (soft ends)
+    let mut marks: Vec<(f64, bool)> = vec![(0.0, false), (PI, false)];
+    if let Some(cc) = crit {
+        if si > 0.0 && cc > ci && cc < 1.0 {
+            let x = ((cc * cc - ci * ci).sqrt() / si).min(1.0);
+            for p in [x.acos(), (-x).acos()] {
+                if p > 0.0 && p < PI {
+                    marks.push((p, true));
+                }
+            }
+        }
+    }
+    marks.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
+    // a panel between two soft ends is split in the middle (the mapping would thin out the
+    // nodes there)
+    let mut i = 0;
+    while i + 1 < marks.len() {
+        if marks[i].1 && marks[i + 1].1 {
+            marks.insert(i + 1, (0.5 * (marks[i].0 + marks[i + 1].0), false));
+        }
+        i += 1;
+    }
+    let mut phis: Vec<(f64, f64)> = Vec::with_capacity(marks.len() * n);
+    for m in marks.windows(2) {
+        let ((a, sa), (b, sb)) = (m[0], m[1]);
+        for (&x, &w) in rule.x.iter().zip(&rule.w) {
+            let (t, dt) = match (sa, sb) {
+                (false, false) => (x, 1.0),
+                (true, false) => (x * x, 2.0 * x),
+                (false, true) => (1.0 - (1.0 - x) * (1.0 - x), 2.0 * (1.0 - x)),
+                (true, true) => (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x)),
+            };
+            // weights normalized to [0, pi] -> 1 (see the factor at the end)
+            phis.push((a + (b - a) * t, w * dt * (b - a) / PI));
+        }
+    }
     let mut total = 0.0;
-    for (&xp, &wp) in rule.x.iter().zip(&rule.w) {
-        let phi = PI * xp;
+    for &(phi, wp) in &phis {
         let (sp, cp) = phi.sin_cos();
         let delta = (si * cp).atan2(ci);
         let theta_b = FRAC_PI_4 + 0.5 * delta;
@@ -46,8 +98,24 @@ pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64
         let theta_eq = (0.5 * (delta + (ci / r).clamp(-1.0, 1.0).acos())).min(theta_b);
         let (se, ce) = theta_eq.sin_cos();
         let weq = dist.w_of(ce, se * se).clamp(wb, 1.0);
+        bps.clear();
+        bps.extend([wb, weq, 1.0]);
+        if let Some(cc) = crit {
+            // wi.h = R cos(theta_h - delta) = cc
+            if cc < r {
+                let a = (cc / r).acos();
+                for t in [delta - a, delta + a] {
+                    if t > 0.0 && t < theta_b {
+                        let (st, ct) = t.sin_cos();
+                        bps.push(dist.w_of(ct, st * st).clamp(wb, 1.0));
+                    }
+                }
+            }
+        }
+        bps.sort_by(|a, b| a.partial_cmp(b).unwrap());
         let mut inner = 0.0;
-        for (lo, hi) in [(wb, weq), (weq, 1.0)] {
+        for seg in bps.windows(2) {
+            let (lo, hi) = (seg[0], seg[1]);
             if hi <= lo {
                 continue;
             }

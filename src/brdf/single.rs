@@ -141,7 +141,7 @@ pub fn eval(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
         m[0][0] += mat.multiple_z(zi, zo);
     }
     if terms.diffuse {
-        m[0][0] += mat.diffuse_z(zi, zo);
+        m[0][0] += mat.diffuse_z(ci, si, zi, co, so, zo);
     }
     m
 }

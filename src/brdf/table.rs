@@ -35,7 +35,7 @@ impl MonostaticTable {
     pub fn build(mat: &Material, nodes: usize, double_order: usize) -> Self {
         let mut m = mat.clone();
         m.spec.double_order = double_order;
-        let scale = mat.spec.distribution.scale();
+        let scale = mat.spec.distribution.table_scale();
         let values: Vec<Mat4> = (0..=nodes)
             .into_par_iter()
             .map(|i| {
@@ -165,6 +165,14 @@ pub struct TablePart {
     pub n_psi: usize,
     /// `[psi node j][z node i][16]`, row major: index `(j (n_z + 1) + i) 16 + k`.
     pub data: Vec<f64>,
+    /// The nodes hold `M cos(theta)` (`theta` the table's bisector angle) instead of `M`,
+    /// and the part's value is the interpolant over `cos(theta)`. Set for the single term
+    /// with correlated masking, whose `M00` diverges as `1 / cos` at grazing (the `min(P_i,
+    /// P_o) / (cos_i cos_o)` branch, which backscatter always takes): no polynomial in `z`
+    /// follows `ln M00` to that node, and a flat face 1e-3 rad from edge-on came out
+    /// 2.5e8 times too bright in the renderer (tests/test_extremes.py). `M cos` is finite
+    /// there.
+    pub cos_weighted: bool,
 }
 
 /// The total Mueller BRDF `f(wi, wo)` (1/sr, no cosine) for a fixed bistatic angle `beta`,
@@ -210,7 +218,8 @@ pub struct TablePart {
 /// after each of the two steps to the range of its two bracketing values (the nodes `i`,
 /// `i+1` in `z`; the `z`-interpolated rows `j`, `j+1` in `psi`); the normalized elements
 /// are clamped to `[-1, 1]` at the end. The part's matrix is `exp(ln M00) * [1, m_1 ..
-/// m_15]`.
+/// m_15]`, divided by `cos(theta)` for a [`TablePart::cos_weighted`] part (whose nodes
+/// hold `M cos(theta)`; the renderer multiplies by `cos(theta_i) / cos(theta)`, at most 2).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BrdfTable {
     /// Bistatic angle (radians), `0 <= beta < pi/2`.
@@ -363,12 +372,13 @@ pub const DEFAULT_DOUBLE_ORDER: usize = 48;
 /// `scale = 1/sqrt(alpha)`, which balances the node density near normal incidence
 /// (`dtheta = dz / scale`, the lobe has width `alpha`) against that near grazing
 /// (`dtheta = scale dz`); the multiple + diffuse terms on the grid of the material's own
-/// albedo tables (`scale = alpha`, 256 intervals: the nodes coincide with theirs); the
+/// albedo tables (`scale = min(alpha, 1)`, 256 intervals: the nodes coincide with theirs); the
 /// double bounce, which is smooth, on a coarse grid.
 pub fn default_grid(kind: PartKind, alpha: f64, _beta: f64) -> (usize, usize, f64) {
     match kind {
         PartKind::Single => (256, 32, 1.0 / alpha.sqrt()),
-        PartKind::Lambertian => (256, 8, alpha),
+        // the material's table scale (`Distribution::table_scale`)
+        PartKind::Lambertian => (256, 8, alpha.min(1.0)),
         PartKind::Double(_) => (32, 8, 1.0),
     }
 }
@@ -457,7 +467,10 @@ pub fn eval_part(p: &TablePart, z: f64, psi: f64) -> [f64; 16] {
 fn part_matrix(p: &TablePart, theta: f64, psi: f64) -> Mat4 {
     let (s, c) = theta.sin_cos();
     let v = eval_part(p, z_of(p.scale, c, s), psi);
-    let m00 = v[0].exp();
+    let mut m00 = v[0].exp();
+    if p.cos_weighted {
+        m00 = if c > 0.0 { m00 / c } else { 0.0 };
+    }
     let mut m = [[0.0; 4]; 4];
     m[0][0] = m00;
     for k in 1..16 {
@@ -689,6 +702,9 @@ impl BrdfTable {
         for g in grids {
             let m = part_material(mat, g.kind);
             let (n_z, n_psi, scale) = (g.n_z, g.n_psi, g.scale);
+            let cos_weighted = g.kind == PartKind::Single
+                && mat.spec.shadowing != crate::microfacet::Shadowing::None
+                && mat.correlation != crate::microfacet::Correlation::None;
             let nz1 = n_z + 1;
             let nodes: Vec<[f64; 16]> = (0..(n_psi + 1) * nz1)
                 .into_par_iter()
@@ -700,7 +716,13 @@ impl BrdfTable {
                     } else {
                         j as f64 * PI / n_psi as f64
                     };
-                    encode(&part_reference(&m, g.kind, frame, beta, theta, psi))
+                    let mut v = part_reference(&m, g.kind, frame, beta, theta, psi);
+                    if cos_weighted {
+                        // cos(theta) > 0 even at the z = 0 node (cos(FRAC_PI_2) = 6e-17)
+                        let c = theta.cos();
+                        v.iter_mut().flatten().for_each(|x| *x *= c);
+                    }
+                    encode(&v)
                 })
                 .collect();
             let nodes = extend_below_horizon(nodes, beta, n_z, n_psi, scale);
@@ -709,6 +731,7 @@ impl BrdfTable {
                 n_z,
                 n_psi,
                 data: nodes.into_iter().flatten().collect(),
+                cos_weighted,
             });
             kinds.push(g.kind);
         }
@@ -757,14 +780,15 @@ impl BrdfTable {
     }
 
     /// The data of all parts in f32, concatenated, with per part
-    /// `(scale, n_z, n_psi, offset)` (`offset` in floats).
+    /// `(scale, n_z, n_psi, offset)` (`offset` in floats; `-scale` for a
+    /// [`TablePart::cos_weighted`] part, as the renderer's header stores it).
     #[allow(clippy::type_complexity)]
     pub fn to_f32(&self) -> (Vec<(f32, u32, u32, u32)>, Vec<f32>) {
         let mut headers = vec![];
         let mut data = vec![];
         for p in &self.parts {
             headers.push((
-                p.scale as f32,
+                (if p.cos_weighted { -p.scale } else { p.scale }) as f32,
                 p.n_z as u32,
                 p.n_psi as u32,
                 data.len() as u32,
@@ -1037,6 +1061,7 @@ mod tests {
         };
         let part = TablePart {
             scale: 0.7,
+            cos_weighted: false,
             n_z: 9,
             n_psi: 0,
             data: zt

@@ -17,7 +17,14 @@
 //! **Smith** (Walter et al. 2007): `G1 = 1/(1 + Lambda(a))`, `a = 1/(alpha tan theta)`,
 //! Beckmann `Lambda = (erf(a) - 1)/2 + exp(-a^2)/(2 a sqrt(pi))` ("exact") or Walter's
 //! rational approximation (the one Mitsuba 3 uses), GGX
-//! `Lambda = (sqrt(1 + 1/a^2) - 1)/2`; Blinn-Phong uses Beckmann with `alpha = sqrt(2/(m+2))`.
+//! `Lambda = (sqrt(1 + 1/a^2) - 1)/2`. Blinn-Phong: the exact Smith function of its own
+//! distribution, `Lambda = N_D / cos theta` (for any isotropic `D`,
+//! `cos theta (1 + Lambda) = int (k.h)+ D d omega`, Heitz 2014 eq. 17, so the exact Smith
+//! `G1` equals the APS `P(k)`), or with `smith_g1 = "walter"` Walter et al.'s recipe: the
+//! Beckmann rational approximation with `alpha = sqrt(2/(m+2))`. That mapping is not
+//! energy conserving for small `m` (the single-bounce white-furnace albedo reaches 1.34 at
+//! grazing for m = 0, 1.03 at m = 10, 1 + 6e-6 at m = 20; tests/test_extremes.py); it was
+//! the `"exact"` Blinn-Phong Smith as well before the extremes tests measured that.
 
 use super::distribution::Distribution;
 use crate::{Error, Result};
@@ -226,6 +233,14 @@ pub fn smith_lambda(dist: &Distribution, variant: SmithG1, cos_t: f64, sin2_t: f
     if sin2_t <= 0.0 {
         return 0.0;
     }
+    if let (Distribution::BlinnPhong { .. }, SmithG1::Exact) = (dist, variant) {
+        // The exact Smith function of the Blinn-Phong distribution (module docs).
+        let c = cos_t.max(0.0);
+        if c == 0.0 {
+            return f64::INFINITY;
+        }
+        return aps_excess(dist, sin2_t.sqrt().atan2(c)) / c;
+    }
     let alpha = dist.scale();
     let tan_t = sin2_t.sqrt() / cos_t.max(0.0);
     if !tan_t.is_finite() {
@@ -234,9 +249,10 @@ pub fn smith_lambda(dist: &Distribution, variant: SmithG1, cos_t: f64, sin2_t: f
     let a = 1.0 / (alpha * tan_t);
     match (dist, variant) {
         (Distribution::Ggx { .. }, _) => 0.5 * ((1.0 + 1.0 / (a * a)).sqrt() - 1.0),
-        (_, SmithG1::Exact) => {
-            0.5 * ((-a * a).exp() / (a * PI.sqrt()) - statrs::function::erf::erfc(a)).max(0.0)
-        }
+        // libm's erfc (musl, < 1 ulp), not statrs 0.19's, whose 10-digit interval constants
+        // put errors of ~1e-11 into Lambda for a in [0.5, 2.25] and steps at its interval
+        // ends (tests/test_extremes.py; the same defect as in render/pulse.rs's norm_cdf)
+        (_, SmithG1::Exact) => 0.5 * ((-a * a).exp() / (a * PI.sqrt()) - libm::erfc(a)).max(0.0),
         (_, SmithG1::Walter) => {
             if a >= 1.6 {
                 0.0

@@ -572,7 +572,15 @@ impl PyBrdfTable {
         self.table.kinds.iter().map(|k| k.name()).collect()
     }
 
-    /// Per part: (scale, n_z, n_psi, data) with data of shape (n_psi + 1, n_z + 1, 16).
+    /// Per part: whether its nodes hold `M cos(theta)` instead of `M` (the single term
+    /// with correlated masking, which diverges as `1 / cos` at grazing; `TablePart::cos_weighted`).
+    #[getter]
+    fn cos_weighted(&self) -> Vec<bool> {
+        self.table.parts.iter().map(|p| p.cos_weighted).collect()
+    }
+
+    /// Per part: (scale, n_z, n_psi, data) with data of shape (n_psi + 1, n_z + 1, 16)
+    /// (node `k = 0`: `ln M00`, of `M00 cos(theta)` for a `cos_weighted` part).
     #[allow(clippy::type_complexity)]
     fn arrays<'py>(&self, py: Python<'py>) -> Vec<(f64, usize, usize, Bound<'py, PyArray3<f64>>)> {
         self.table

@@ -402,17 +402,19 @@ struct VisParams {
 
 /// The material tables as uploaded: per material [`HEADER_WORDS`] words of header, four
 /// per part `[offset, n_z, n_psi, scale]` (offset and counts as u32 bits; `n_z = 0`: no
-/// such part), then the parts' data (layout in [`crate::brdf::table::BrdfTable`]).
+/// such part; `-scale` for a part whose nodes hold `M cos(theta)`,
+/// [`crate::brdf::table::TablePart::cos_weighted`]), then the parts' data (layout in
+/// [`crate::brdf::table::BrdfTable`]).
 #[derive(Debug, Clone)]
 pub struct GpuTables {
     pub data: Vec<f32>,
     /// Upper bound of `M00 cos(theta_i)` over all materials (1/sr) away from the last
     /// table cell before grazing: it sets the fixed-point scale, and the kernel clamps
-    /// each pixel's accumulated value to `4 pi delta^2 max_m00`. (`M00` itself diverges at
-    /// grazing for some distributions, e.g. GGX's single term as `1 / cos`, and a cubic
-    /// through that node bounds nothing useful in the last cell; pixels there, within
-    /// `atan(1 / (scale n_z))` of grazing (0.1-0.3 deg at the default grids), are the
-    /// only ones the clamp can touch.)
+    /// each pixel's accumulated value to `4 pi delta^2 max_m00`. (The single term with
+    /// correlated masking, whose `M00` diverges at grazing as `1 / cos`, is tabulated as
+    /// `M cos(theta)` and bounded with `cos(theta_i) / cos(theta) <= 2`; another part
+    /// that grew toward grazing could still exceed the bound in the last cell, within
+    /// `atan(1 / (scale n_z))` of grazing, where the clamp would touch it.)
     pub max_m00: f64,
 }
 
@@ -427,6 +429,8 @@ pub struct PartRef<'a> {
     pub n_z: usize,
     pub n_psi: usize,
     pub data: &'a [f64],
+    /// The nodes hold `M cos(theta)` ([`crate::brdf::table::TablePart::cos_weighted`]).
+    pub cos_weighted: bool,
 }
 
 impl<'a> From<&'a crate::brdf::table::TablePart> for PartRef<'a> {
@@ -436,6 +440,7 @@ impl<'a> From<&'a crate::brdf::table::TablePart> for PartRef<'a> {
             n_z: p.n_z,
             n_psi: p.n_psi,
             data: &p.data,
+            cos_weighted: p.cos_weighted,
         }
     }
 }
@@ -469,7 +474,11 @@ impl GpuTables {
                 data[h] = f32::from_bits(offset);
                 data[h + 1] = f32::from_bits(part.n_z as u32);
                 data[h + 2] = f32::from_bits(part.n_psi as u32);
-                data[h + 3] = part.scale as f32;
+                data[h + 3] = (if part.cos_weighted {
+                    -part.scale
+                } else {
+                    part.scale
+                }) as f32;
                 data.extend(part.data.iter().map(|&v| v as f32));
                 // Interpolated ln M00 lies between its two bracketing z nodes (and rows),
                 // so per cell max(M00) x max(cos theta_i) bounds M00 cos(theta_i) there,
@@ -483,12 +492,25 @@ impl GpuTables {
                     );
                     (th - 0.5 * beta).max(0.0).cos()
                 };
+                // a cos-weighted part holds M00 cos(theta): the kernel multiplies it by
+                // cos(theta_i) / cos(theta), which the lit condition (cos_o > 0) bounds by
+                // 2 cos(beta/2) (and is 1 at beta = 0)
+                let ratio = if beta > 0.0 {
+                    2.0 * (0.5 * beta).cos()
+                } else {
+                    1.0
+                };
                 let mut mx = 0.0f64;
                 for row in 0..rows {
                     for i in 1..part.n_z {
                         let a = part.data[(row * nz1 + i) * 16];
                         let b = part.data[(row * nz1 + i + 1) * 16];
-                        mx = mx.max(a.max(b).exp() * cos_i(i).max(cos_i(i + 1)));
+                        let w = if part.cos_weighted {
+                            ratio
+                        } else {
+                            cos_i(i).max(cos_i(i + 1))
+                        };
+                        mx = mx.max(a.max(b).exp() * w);
                     }
                 }
                 sum_max += mx;
@@ -1469,6 +1491,7 @@ pub(crate) mod tests {
                 n_z: 4,
                 n_psi: 0,
                 data: &data,
+                cos_weighted: false,
             }]],
             0.0,
         )
@@ -1707,6 +1730,7 @@ mod shadow_tests {
                     n_z: 4,
                     n_psi: 0,
                     data: &data,
+                    cos_weighted: false,
                 }]],
                 beta,
             )
