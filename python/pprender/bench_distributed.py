@@ -32,6 +32,7 @@ returns stored profiles), the inputs of the N-GPU estimate written below the tab
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import statistics
@@ -70,6 +71,19 @@ def _warm_worker(path: str) -> float:
         for m in range(len(st.material_specs)):
             pprender.render(st.scene(s, m), st.sensor, st.attitudes[:1], outputs=("profile",))
     return time.perf_counter() - t0
+
+
+def _cpu_jiffies() -> tuple[float, float]:
+    """(busy, idle) CPU seconds of the whole machine so far (/proc/stat; NaN elsewhere):
+    busy includes other users' processes and time stolen by the hypervisor."""
+    try:
+        with open("/proc/stat") as f:
+            v = [float(x) for x in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return math.nan, math.nan
+    tick = float(os.sysconf("SC_CLK_TCK"))
+    user, nice, system, idle, iowait, irq, softirq, steal = v
+    return (user + nice + system + irq + softirq + steal) / tick, (idle + iowait) / tick
 
 
 def _noop(i: int) -> int:
@@ -170,11 +184,15 @@ def run(workers: list[int], n_attitudes: int, resolution: int, chunk: int, log: 
                 warm = client.run(_warm_worker, path)
                 t_warm = max(warm.values())
                 print(f"[{n} worker(s)] building ({len(database.list_chunks(path))} chunks)", file=log)
+                busy0, _ = _cpu_jiffies()
+                own0 = time.process_time()
                 s: BuildSummary = build_database_distributed(
                     path, setup["shapes"], setup["materials"], setup["attitudes"], setup["sensor"],
                     chunk_attitudes=chunk, attitude_grid={"method": "so3.grid", "n": n_attitudes},
                     client=client, progress=False,
                 )
+                busy = _cpu_jiffies()[0] - busy0
+                own = time.process_time() - own0 + sum(w.cpu_seconds for w in s.workers)
                 if n == max(workers):
                     extra["scheduler_s_per_task"] = _scheduler_overhead(client)
             finally:
@@ -184,6 +202,10 @@ def run(workers: list[int], n_attitudes: int, resolution: int, chunk: int, log: 
                 "workers": n, "cluster": t_cluster, "store": t_store, "warm": t_warm, "summary": s,
                 "end_to_end": t_cluster + t_store + t_warm + s.setup_seconds + s.wall_seconds,
                 "devices": sorted({i["device"]["name"] for i in info.values()}),
+                # cores in use on average during the build: by this benchmark's processes
+                # (workers + client/scheduler), and by everything else on the machine
+                "own_cores": own / s.wall_seconds,
+                "other_cores": max(0.0, busy - own) / s.wall_seconds,
             })
             print(f"[{n} worker(s)] {s.realizations} realizations in {s.wall_seconds:.1f} s "
                   f"({s.realizations_per_second:.1f}/s)", file=log)
@@ -226,13 +248,20 @@ def report(res: dict[str, Any], load_start: str, load_end: str, total: float) ->
         "",
         "Steady state (warm workers: device open, materials built):",
         "",
-        "| workers | build wall s | realizations/s | speedup |",
-        "| ---: | ---: | ---: | ---: |",
+        "| workers | build wall s | realizations/s | speedup | cores used by the benchmark | cores used by other processes |",
+        "| ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in rows:
         s = r["summary"]
         out.append(f"| {r['workers']} | {s.wall_seconds:.1f} | {s.realizations_per_second:.1f} | "
-                   f"{s.realizations_per_second / base['summary'].realizations_per_second:.2f}x |")
+                   f"{s.realizations_per_second / base['summary'].realizations_per_second:.2f}x | "
+                   f"{r['own_cores']:.2f} | {r['other_cores']:.2f} |")
+    out += [
+        "",
+        f"Cores: average over the build of the CPU time of the workers and of this process (client, "
+        f"scheduler), and of the rest of the machine's busy time (/proc/stat, including hypervisor steal); "
+        f"the machine has {threads_available()}.",
+    ]
     out += [
         "",
         "End to end (cluster start + store creation + worker warm-up + build):",
@@ -247,7 +276,8 @@ def report(res: dict[str, Any], load_start: str, load_end: str, total: float) ->
                    f"{s.setup_seconds + s.wall_seconds:.1f} | {r['end_to_end']:.1f} | {rate:.1f} | "
                    f"{rate / (n_real / base['end_to_end']):.2f}x |")
     for r in rows:
-        out += ["", f"Per worker, {r['workers']} worker(s) (busy: sum of task times; setup: store open + scene):", "",
+        out += ["", f"Per worker, {r['workers']} worker(s) (busy: sum of task times; setup: store open + scene; "
+                "CPU: the worker process's CPU time, all threads):", "",
                 r["summary"].table()]
     chunk_mb = res["chunk_bytes"] / 1e6
     out += [
@@ -309,7 +339,7 @@ realizations/s) and `t_o` costs a fraction `0.05 R_gpu / 256` of the render time
 """
 
 
-def main(workers: list[int] | None = None, n_attitudes: int = 1536, resolution: int = 64, chunk: int = 128,
+def main(workers: list[int] | None = None, n_attitudes: int = 2560, resolution: int = 64, chunk: int = 128,
          write: bool | str | os.PathLike[str] = False, quiet: bool = False) -> str:
     """Run the benchmark and return (print, optionally write) the markdown report."""
     workers = workers or [1, 2]
@@ -323,7 +353,7 @@ def main(workers: list[int] | None = None, n_attitudes: int = 1536, resolution: 
 def _cli(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(prog="python -m pprender.bench_distributed", description=__doc__.splitlines()[0])
     p.add_argument("--workers", default="1,2", help="worker counts, comma-separated (default 1,2)")
-    p.add_argument("--attitudes", type=int, default=1536, help="attitudes (default 1536)")
+    p.add_argument("--attitudes", type=int, default=2560, help="attitudes (default 2560)")
     p.add_argument("--resolution", type=int, default=64, help="image side in pixels (default 64)")
     p.add_argument("--chunk", type=int, default=128, help="attitudes per chunk (default 128)")
     p.add_argument("--write", nargs="?", const=True, default=False, metavar="PATH",

@@ -111,6 +111,10 @@ class ChunkReport:
     setup_seconds : float
         Of which opening the store and building the scene (materials: ~0.5 s each, once
         per worker process).
+    cpu_seconds : float
+        CPU time of the worker process (all its threads, e.g. lavapipe's) during the
+        task; ``cpu_seconds / seconds`` below the worker's expected cores means it waited
+        for the CPU (other processes).
     worker : str
         Address of the worker that ran it.
     pid : int
@@ -126,6 +130,7 @@ class ChunkReport:
     realizations: int
     seconds: float
     setup_seconds: float
+    cpu_seconds: float
     worker: str
     pid: int
     written: bool
@@ -145,6 +150,8 @@ class WorkerThroughput:
         Sum of its task times.
     setup_seconds : float
         Of which store opening and scene/material building.
+    cpu_seconds : float
+        CPU time of the worker process during its tasks (all threads).
     """
 
     worker: str
@@ -152,6 +159,7 @@ class WorkerThroughput:
     realizations: int
     busy_seconds: float
     setup_seconds: float
+    cpu_seconds: float
 
     @property
     def realizations_per_second(self) -> float:
@@ -203,16 +211,17 @@ class BuildSummary:
     def table(self) -> str:
         """A markdown table of the per-worker throughput and the total."""
         lines = [
-            "| worker | chunks | realizations | busy s | of which setup s | realizations/s (busy) |",
-            "|---|---:|---:|---:|---:|---:|",
+            "| worker | chunks | realizations | busy s | of which setup s | CPU s / busy s | realizations/s (busy) |",
+            "|---|---:|---:|---:|---:|---:|---:|",
         ]
         for w in self.workers:
+            cpu = w.cpu_seconds / w.busy_seconds if w.busy_seconds > 0 else math.nan
             lines.append(
                 f"| {w.worker} | {w.chunks} | {w.realizations} | {w.busy_seconds:.2f} | "
-                f"{w.setup_seconds:.2f} | {w.realizations_per_second:.1f} |"
+                f"{w.setup_seconds:.2f} | {cpu:.2f} | {w.realizations_per_second:.1f} |"
             )
         lines.append(
-            f"| **all** (wall {self.wall_seconds:.2f} s) | {self.chunks_written} | {self.realizations} | | | "
+            f"| **all** (wall {self.wall_seconds:.2f} s) | {self.chunks_written} | {self.realizations} | | | | "
             f"{self.realizations_per_second:.1f} |"
         )
         return "\n".join(lines)
@@ -227,14 +236,14 @@ class BuildSummary:
 
 def _write_chunk_task(path: str, index: int, render: RenderFn | None) -> ChunkReport:
     """The Dask task: render and write chunk ``index`` of the store at ``path``."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     st = _Store(path)
     c = st.chunk(index)
     if not c.done:
         st.scene(c.shape, c.material)  # materials are built here (cached per process)
     t1 = time.perf_counter()
     written = write_chunk(path, c, render=render, _store=st)
-    t2 = time.perf_counter()
+    t2, c2 = time.perf_counter(), time.process_time()
     return ChunkReport(
         index=int(index),
         shape=c.shape,
@@ -243,6 +252,7 @@ def _write_chunk_task(path: str, index: int, render: RenderFn | None) -> ChunkRe
         realizations=(c.stop - c.start) if written else 0,
         seconds=t2 - t0,
         setup_seconds=t1 - t0,
+        cpu_seconds=c2 - c0,
         worker=_worker_address(),
         pid=os.getpid(),
         written=written,
@@ -402,6 +412,7 @@ def _summarize(reports: Sequence[ChunkReport]) -> tuple[WorkerThroughput, ...]:
             realizations=sum(r.realizations for r in rs),
             busy_seconds=sum(r.seconds for r in rs),
             setup_seconds=sum(r.setup_seconds for r in rs),
+            cpu_seconds=sum(r.cpu_seconds for r in rs),
         )
         for w, rs in sorted(per.items())
     )
