@@ -275,6 +275,20 @@ def report(res: dict[str, Any], load_start: str, load_end: str, total: float) ->
         out.append(f"| {r['workers']} | {r['cluster']:.1f} | {r['store']:.1f} | {r['warm']:.1f} | "
                    f"{s.setup_seconds + s.wall_seconds:.1f} | {r['end_to_end']:.1f} | {rate:.1f} | "
                    f"{rate / (n_real / base['end_to_end']):.2f}x |")
+    if len(rows) > 1:
+        last = rows[-1]
+        per = lambda r: r["summary"].realizations_per_second / r["workers"]  # noqa: E731
+        cpu = lambda r: sum(w.cpu_seconds for w in r["summary"].workers) / sum(  # noqa: E731
+            w.busy_seconds for w in r["summary"].workers)
+        out += [
+            "",
+            f"Per worker, {last['workers']} workers render at {per(last) / per(base):.2f} of the single worker's "
+            f"rate; their processes used {cpu(last):.2f} CPU s per busy s against {cpu(base):.2f} for the single "
+            "worker (above 1: its Python and lavapipe threads ran in parallel at times, on the free core), and "
+            "the client and scheduler share the same two cores. Warm-up (device, materials) and cluster start "
+            "are fixed costs per worker: they lower the end-to-end speedup of this short build and are "
+            "amortized in long ones.",
+        ]
     for r in rows:
         out += ["", f"Per worker, {r['workers']} worker(s) (busy: sum of task times; setup: store open + scene; "
                 "CPU: the worker process's CPU time, all threads):", "",
@@ -308,11 +322,11 @@ No GPU measurement exists yet. Symbols:
 - `t_o`: a chunk's cost outside the renderer (store open, scene, padding, Zarr encode and
   write); measured above on local disk, a few to tens of ms; on a shared file system add the
   chunk's write time at one worker's bandwidth and the metadata latency of ~3 small files.
-- `t_s`: scheduler cost per task, ~1 ms (measured above, local); Dask's scheduler handles a
-  few thousand tasks per second in all.
-- `t_w`: warm-up per worker: device creation and shader compilation (~1 s) + `n_materials x
-  0.5 s` of material tables (built on the worker's CPU, not the GPU) + worker start (seconds;
-  minutes if the batch queue is slow).
+- `t_s`: scheduler round trip per task, 1-2 ms (measured above on this machine; Dask's
+  documentation quotes ~1 ms of scheduler overhead per task), paid once per chunk.
+- `t_w`: warm-up per worker: device creation and shader compilation (~0.5-1 s on lavapipe;
+  GPU not measured) + `n_materials x 0.3-0.5 s` of material tables (built on the worker's
+  CPU, not the GPU) + worker start (seconds; minutes if the batch queue is slow).
 - `W`: aggregate write bandwidth of the shared file system (bytes/s).
 
 Assumptions: one worker per GPU, one thread each, every GPU alike; chunks independent (no
@@ -328,7 +342,7 @@ and the steady throughput is the smallest of three limits:
 
     R(N) = min( N x A / t_c,            # GPUs
                 W / (B x 64 bytes),     # shared file system (float32 Mueller)
-                A / t_s )               # scheduler (A = 256: ~250k realizations/s)
+                A / t_s )               # scheduler (A = 256, t_s = 2 ms: ~128k realizations/s)
 
 Example with the symbol left in: at `A = 256`, `B = 200` (a chunk is 3.3 MB) and `t_o =
 0.05 s` on a parallel file system, `t_c = 256 / R_gpu + 0.05 s`; the GPUs are the limit as
