@@ -23,11 +23,12 @@ import numpy as np
 from . import _core
 from ._core import BrdfTable, Error, Material, __version__, brdf_table
 from .lidar import SPEED_OF_LIGHT, Lidar, RenderResult, Scene, device_info, render
-from . import classify, database, so3  # noqa: E402  (their heavy imports are lazy)
+from . import classify, database, distributed, so3  # noqa: E402  (their heavy imports are lazy)
 from . import instrument  # noqa: E402
 from .classify import Classifier
 from .instrument import Instrument, Measurement, expected_counts, measure
 from .database import build_database, open_database
+from .distributed import build_database_distributed
 
 __all__ = [
     "BrdfTable",
@@ -38,6 +39,8 @@ __all__ = [
     "instrument",
     "measure",
     "build_database",
+    "build_database_distributed",
+    "distributed",
     "classify",
     "database",
     "open_database",
