@@ -186,8 +186,11 @@ def test_resume_skips_complete_chunks(setup, ref, client, tmp_path) -> None:
     done = [0, 5, 6, 15]
     for i in done:
         database.write_chunk(path, i)
-    s = build_database_distributed(path, *_args(setup), client=client, progress=False, **KW)
+    # through the scheduler's address this time (a connection of its own, closed afterwards)
+    address = client.scheduler.address
+    s = build_database_distributed(path, *_args(setup), scheduler_address=address, progress=False, **KW)
     _check_summary(s, N_CHUNKS - len(done))
+    assert len(s.workers) >= 1 and all(w.worker in client.scheduler_info()["workers"] for w in s.workers)
     assert sorted(c.index for c in s.chunks) == sorted(set(range(N_CHUNKS)) - set(done))
     assert_same_store(path, ref)
     again = build_database_distributed(path, *_args(setup), client=client, progress=False, **KW)
