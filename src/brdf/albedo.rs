@@ -75,12 +75,7 @@ pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64
     for m in marks.windows(2) {
         let ((a, sa), (b, sb)) = (m[0], m[1]);
         for (&x, &w) in rule.x.iter().zip(&rule.w) {
-            let (t, dt) = match (sa, sb) {
-                (false, false) => (x, 1.0),
-                (true, false) => (x * x, 2.0 * x),
-                (false, true) => (1.0 - (1.0 - x) * (1.0 - x), 2.0 * (1.0 - x)),
-                (true, true) => (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x)),
-            };
+            let (t, dt) = crate::quad::graded(x, sa, sb);
             // weights normalized to [0, pi] -> 1 (see the factor at the end)
             phis.push((a + (b - a) * t, w * dt * (b - a) / PI));
         }

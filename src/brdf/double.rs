@@ -360,12 +360,7 @@ fn phi_rule(n: usize, marks: &[Mark]) -> Vec<(f64, f64)> {
         let rule = crate::quad::gauss_legendre(m);
         let l = b - a;
         for (&x, &w) in rule.x.iter().zip(&rule.w) {
-            let (t, dt) = match (sa, sb) {
-                (false, false) => (x, 1.0),
-                (true, false) => (x * x, 2.0 * x),
-                (false, true) => (1.0 - (1.0 - x) * (1.0 - x), 2.0 * (1.0 - x)),
-                (true, true) => (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x)),
-            };
+            let (t, dt) = crate::quad::graded(x, sa, sb);
             out.push((origin + a + l * t, w * l * dt));
         }
     }
