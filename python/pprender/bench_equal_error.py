@@ -81,21 +81,11 @@ def _mitsuba_scene(mesh: Any, ext: float, smooth: bool, d: str) -> Any:
     mi.set_variant("llvm_ad_mono_polarized")
     path = os.path.join(d, "mesh.ply")
     mesh.export(path)
-    return mi, mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
-        "sensor": {
-            "type": "orthographic",
-            "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 4 * ext], target=[0, 0, 0], up=[0, 1, 0])
-            @ mi.ScalarTransform4f.scale([ext, ext, 1.0]),
-            "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}},
-            "sampler": {"type": "independent"},
-        },
-        "emitter": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
-        "shape": {"type": "ply", "filename": path, "face_normals": not smooth,
-                  "bsdf": {"type": "roughconductor", "distribution": "beckmann", "alpha": ALPHA,
-                           "eta": ALUMINIUM_1064.real, "k": ALUMINIUM_1064.imag}},
-    })
+    from .bench_render import mitsuba_monostatic_scene
+
+    return mi, mitsuba_monostatic_scene(mi, path, ext, RES, {
+        "type": "roughconductor", "distribution": "beckmann", "alpha": ALPHA,
+        "eta": ALUMINIUM_1064.real, "k": ALUMINIUM_1064.imag}, smooth=smooth)
 
 
 def measure(repeats: int = 3, batch: int = 32, max_spp: int = 4096, device: str = "auto") -> list[dict[str, Any]]:

@@ -98,6 +98,32 @@ def memory_vs_n(ns: list[int], device: str) -> list[dict[str, Any]]:
     return out
 
 
+def mitsuba_monostatic_scene(mi: Any, ply_path: str, extent: float, res: int, bsdf: dict[str, Any],
+                             smooth: bool | None = None) -> Any:
+    """Mitsuba 3 scene of pprender's monostatic view: an orthographic sensor over the
+    square [-extent, extent]^2 looking down -z (box pixel filter, res x res), a directional
+    emitter of unit irradiance along the view, the ``stokes`` integrator over ``path`` with
+    ``max_depth`` 2 (single scattering), the mesh at ``ply_path`` with ``bsdf`` (vertex
+    normals when ``smooth``, face normals when False, Mitsuba's default when None). Its pixel radiance times ``4 pi delta^2`` is pprender's
+    differential cross-section."""
+    shape: dict[str, Any] = {"type": "ply", "filename": ply_path, "bsdf": bsdf}
+    if smooth is not None:
+        shape["face_normals"] = not smooth
+    return mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
+        "sensor": {
+            "type": "orthographic",
+            "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 4 * extent], target=[0, 0, 0], up=[0, 1, 0])
+            @ mi.ScalarTransform4f.scale([extent, extent, 1.0]),
+            "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent"},
+        },
+        "emitter": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
+        "shape": shape,
+    })
+
+
 def mitsuba_stokes(scene_mesh: Any, extent: float, repeats: int) -> dict[str, Any]:
     from pprender.bench import MitsubaBench  # reuse its LLVM preparation
 
@@ -109,23 +135,9 @@ def mitsuba_stokes(scene_mesh: Any, extent: float, repeats: int) -> dict[str, An
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "cubesat.ply")
         scene_mesh.export(path)
-        scene = mi.load_dict({
-            "type": "scene",
-            "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
-            "sensor": {
-                "type": "orthographic",
-                "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 4 * extent], target=[0, 0, 0], up=[0, 1, 0])
-                @ mi.ScalarTransform4f.scale([extent, extent, 1.0]),
-                "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}},
-                "sampler": {"type": "independent"},
-            },
-            "emitter": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
-            "shape": {
-                "type": "ply", "filename": path,
-                "bsdf": {"type": "roughconductor", "distribution": "beckmann", "alpha": 0.15,
-                         "eta": float(eta.real), "k": float(eta.imag)},
-            },
-        })
+        scene = mitsuba_monostatic_scene(mi, path, extent, RES, {
+            "type": "roughconductor", "distribution": "beckmann", "alpha": 0.15,
+            "eta": float(eta.real), "k": float(eta.imag)})
 
         def render(spp: int, seed: int) -> np.ndarray:
             img = np.asarray(mi.render(scene, spp=spp, seed=seed))  # type: ignore[arg-type]
