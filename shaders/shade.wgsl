@@ -59,6 +59,9 @@ override SHADOWS: bool = false;    // transmitter cast shadows (beta > 0), see a
 // zero. Set from what the output needs (SensorSetup::element_mask in src/render/gpu.rs:
 // an unpolarized transmitter's intensity needs M00 alone).
 override ELEMENT_MASK: u32 = 0xffffu;
+// Visibility samples per pixel K (= params.samples; a constant so that K = 1 compiles to
+// the single-sample kernel).
+override SAMPLES: u32 = 1u;
 
 const PI: f32 = 3.14159265358979;
 const MAX_PARTS: u32 = 3u;
@@ -85,7 +88,8 @@ struct Params {
     beta: f32,         // bistatic angle (rad)
     max_extent: f32,   // cap on the sub-pixel range widths (m)
     tx_width: u32,     // side of the transmitter's id map (texels; SHADOWS only)
-    _pad0: f32,
+    samples: u32,      // visibility samples per pixel K: layers l K .. l K + K - 1 of tri_ids
+    offsets: array<vec4<f32>, 16>, // their (u, v) in the pixel (from its top-left corner)
 }
 
 @group(0) @binding(0) var tri_ids: texture_2d_array<u32>;
@@ -360,6 +364,189 @@ fn in_shadow(tri: u32, rot: mat3x3<f32>, p: vec3<f32>, p0: vec3<f32>, p1: vec3<f
     return all_closer;
 }
 
+// Shade the point (px, py) (telescope frame, m) of triangle `tri` in attitude `layer`: writes
+// the differential cross-section of a whole pixel there (Mueller, or Stokes/intensity for
+// CHANNELS < 16; zero where unlit or shadowed) to `out` and returns (r0, a, b, hit): the
+// range, the pixel's footprint widths, and 1 if the triangle is not degenerate in
+// projection (else 0, and nothing is written). Twin: render::twin::shade_point.
+fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32, 16>>) -> vec4<f32> {
+    var hit = vec4<f32>(0.0);
+    let rot = rotations[layer];
+    let q0 = geometry[3u * tri];
+    let p0 = rot * q0.xyz;
+    let p1 = rot * geometry[3u * tri + 1u].xyz;
+    let p2 = rot * geometry[3u * tri + 2u].xyz;
+    let mat = bitcast<u32>(q0.w);
+    // barycentrics of (px, py) in the projected triangle
+    let e1 = p1.xy - p0.xy;
+    let e2 = p2.xy - p0.xy;
+    let d = vec2<f32>(px, py) - p0.xy;
+    let den = e1.x * e2.y - e1.y * e2.x;
+    var ng = cross(p1 - p0, p2 - p0);
+    if (abs(den) > 0.0 && dot(ng, ng) > 0.0) {
+        hit.w = 1.0;
+        let l1 = (d.x * e2.y - d.y * e2.x) / den;
+        let l2 = (e1.x * d.y - e1.y * d.x) / den;
+        let l0 = 1.0 - l1 - l2;
+        let pz = p0.z + l1 * (p1.z - p0.z) + l2 * (p2.z - p0.z);
+        let p = vec3<f32>(px, py, pz);
+        let wi = params.wi.xyz;
+        let wo = params.wo.xyz;
+        let sum_dir = wi + wo;
+        hit.x = -0.5 * dot(p, sum_dir);
+        ng = normalize(ng);
+        if (ng.z < 0.0) {
+            ng = -ng;
+        }
+        // range gradient across the pixel (plane z = z0 - (nx x + ny y) / nz)
+        let nz = max(ng.z, 1e-12);
+        let dzdx = -ng.x / nz;
+        let dzdy = -ng.y / nz;
+        hit.y = min(abs(0.5 * (sum_dir.x + sum_dir.z * dzdx)) * params.pix, params.max_extent);
+        hit.z = min(abs(0.5 * (sum_dir.y + sum_dir.z * dzdy)) * params.pix, params.max_extent);
+        var n = ng;
+        if (params.has_normals != 0u) {
+            let base = 3u * params.n_tri + 3u * tri;
+            let ns = l0 * geometry[base].xyz + l1 * geometry[base + 1u].xyz
+                + l2 * geometry[base + 2u].xyz;
+            n = safe_normalize(rot * ns, ng);
+            if (dot(n, ng) < 0.0) {
+                n = -n;
+            }
+        }
+        let cos_i = dot(n, wi);
+        let cos_o = dot(n, wo);
+        var lit = cos_i > 0.0 && cos_o > 0.0;
+        if (SHADOWS && lit) {
+            // rule 0: a facet turned away from the transmitter shadows itself
+            lit = dot(ng, wi) > 0.0 && !in_shadow(tri, rot, p, p0, p1, p2, layer);
+        }
+        if (lit) {
+            // table coordinates (src/brdf/table.rs, bisector frame): b = bisector,
+            // e_phi = normalize(n x b), e_theta = e_phi x b,
+            // psi = atan2((wi - wo).e_phi, (wi - wo).e_theta), mirrored when < 0
+            let b = safe_normalize(sum_dir, n);
+            let cos_t = clamp(dot(n, b), 0.0, 1.0);
+            let nxb = cross(n, b);
+            let sin_t = length(nxb);
+            var e_phi: vec3<f32>;
+            if (sin_t > 1e-7) {
+                e_phi = nxb / sin_t;
+            } else {
+                e_phi = any_perp(n);
+            }
+            var psi = 0.0;
+            var mirrored = false;
+            if (params.beta > 0.0) {
+                let e_theta = cross(e_phi, b);
+                let tv = wi - wo;
+                psi = atan2(dot(tv, e_phi), dot(tv, e_theta));
+                if (psi < 0.0) {
+                    psi = -psi;
+                    mirrored = true;
+                }
+            }
+            // z of the table grid: cot theta = s z / (1 - z)  =>  z = cos / (s sin + cos)
+            var m: array<f32, 16>;
+            for (var part = 0u; part < MAX_PARTS; part++) {
+                let sw = tables[mat * HEADER_WORDS + part * 4u + 3u];
+                let scale = abs(sw);
+                let z = cos_t / max(scale * sin_t + cos_t, 1e-30);
+                // cos_i / cos_t <= 2 cos(beta/2) while lit (1 at beta = 0)
+                let w = select(cos_i, min(cos_i / max(cos_t, 1e-30), 2.0), sw < 0.0);
+                add_part(mat, part, z, psi, w, &m);
+            }
+            if (mirrored) {
+                for (var e = 1u; e < 16u; e++) {
+                    m[e] *= mirror_sign(e);
+                }
+            }
+            // the table's beam bases: x = normalize(e_phi - (e_phi.w) w), y = k x x
+            let k_in = -wi;
+            let x_in = safe_normalize(e_phi - dot(e_phi, wi) * wi, any_perp(wi));
+            let x_out = safe_normalize(e_phi - dot(e_phi, wo) * wo, any_perp(wo));
+            let y_in = cross(k_in, x_in);
+            let y_out = cross(wo, x_out);
+            // telescope bases: x_in_t = normalize(k_in x Y), x_out_t = X (wo = Z)
+            let x_in_t = normalize(cross(k_in, vec3<f32>(0.0, 1.0, 0.0)));
+            let y_in_t = cross(k_in, x_in_t);
+            let x_out_t = vec3<f32>(1.0, 0.0, 0.0);
+            // S_sp_in = L(b_in) S_t_in: cos b_in = x_in.x_in_t, sin b_in = x_in.y_in_t
+            let ai = double_angle(dot(x_in, x_in_t), dot(x_in, y_in_t));
+            // S_t_out = L(b_out) S_sp_out: cos = x_out_t.x_out, sin = x_out_t.y_out
+            let ao = double_angle(dot(x_out_t, x_out), dot(x_out_t, y_out));
+            // M_t = L(ao) M L(ai), L(c, s) = [[1,0,0,0],[0,c,s,0],[0,-s,c,0],[0,0,0,1]]
+            var tmp: array<f32, 16>;
+            for (var i = 0u; i < 4u; i++) {
+                let a1 = m[i * 4u + 1u];
+                let a2 = m[i * 4u + 2u];
+                tmp[i * 4u] = m[i * 4u];
+                tmp[i * 4u + 1u] = a1 * ai.x - a2 * ai.y;
+                tmp[i * 4u + 2u] = a1 * ai.y + a2 * ai.x;
+                tmp[i * 4u + 3u] = m[i * 4u + 3u];
+            }
+            // (cos_i is in each part's weight, add_part)
+            let k = 4.0 * PI * params.pix * params.pix;
+            for (var j = 0u; j < 4u; j++) {
+                let b1 = tmp[4u + j];
+                let b2 = tmp[8u + j];
+                (*out)[j] = k * tmp[j];
+                (*out)[4u + j] = k * (ao.x * b1 + ao.y * b2);
+                (*out)[8u + j] = k * (-ao.y * b1 + ao.x * b2);
+                (*out)[12u + j] = k * tmp[12u + j];
+            }
+            if (CHANNELS < 16u) {
+                let s = params.s_tx;
+                var st: array<f32, 16>;
+                for (var i = 0u; i < 4u; i++) {
+                    st[i] = (*out)[i * 4u] * s.x + (*out)[i * 4u + 1u] * s.y
+                        + (*out)[i * 4u + 2u] * s.z + (*out)[i * 4u + 3u] * s.w;
+                }
+                *out = st;
+            }
+        }
+    }
+    return hit;
+}
+
+// Add one shaded surface's values `v` (clamped) at range r0 with footprint widths (wa, wb)
+// to the profile of attitude `layer`: the pulse integrated over each bin, its tails beyond
+// the support folded into the end bins (weights sum to 1; twin:
+// render::pulse::bin_weights_folded).
+fn add_profile(layer: u32, r0: f32, wa: f32, wb: f32, v: ptr<function, array<f32, 16>>) {
+    let half_w = 0.5 * (wa + wb) + params.support;
+    let lo = (r0 - half_w - params.r_min) / params.bin_width;
+    let hi = (r0 + half_w - params.r_min) / params.bin_width;
+    let k0 = u32(clamp(floor(lo), 0.0, f32(params.n_bins - 1u)));
+    let k1 = u32(clamp(floor(hi), 0.0, f32(params.n_bins - 1u)));
+    var c_prev = 0.0;
+    for (var kb = k0; kb <= k1; kb++) {
+        var c_next = 1.0;
+        if (kb < k1) {
+            c_next = pulse_cdf_gauss_box2(params.r_min + f32(kb + 1u) * params.bin_width - r0,
+                                          params.sigma, wa, wb);
+        }
+        let w = (c_next - c_prev) * params.fix_scale;
+        c_prev = c_next;
+        if (w != 0.0) {
+            let base = (layer * params.n_bins + kb) * CHANNELS;
+            for (var c = 0u; c < CHANNELS; c++) {
+                fixed_add(base + c, w * (*v)[c], false);
+            }
+        }
+    }
+}
+
+// One invocation per pixel. The pixel's K visibility samples (src/render/gpu.rs,
+// sample_offsets) are grouped by the triangle they see; each triangle seen by c of them is
+// shaded once, at the mean of its samples' points (inside it: the triangle is convex), and
+// counts for c / K of the pixel's area, its footprint widths (a, b) scaled by the extent of
+// its samples across the pixel in u and in v (max - min + 1/K; 1 for a whole pixel). A pixel
+// whose samples all see one triangle is shaded at its centre (the samples' mean) for its
+// whole area: exactly the single-sample result. The range output is the covered samples'
+// mean range, with the covered fraction of the samples; in footprint mode the widths are
+// those of the triangle seen by the most samples (an approximation where a pixel spans
+// surfaces at different ranges). Twin: render::twin::render_cpu.
 @compute @workgroup_size(8, 8, 1)
 fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
            @builtin(local_invocation_index) lidx: u32) {
@@ -369,149 +556,86 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
     let inside = col < params.width && row < params.height;
     var out: array<f32, 16>;
     var acc_out: array<f32, 16>; // out, clamped for the fixed-point sums
-    var r0 = 0.0;
-    var wa = 0.0;
-    var wb = 0.0;
-    var covered = false;
+    // bound every channel (|M_ij| <= M00) for the fixed-point sums
+    let cap = 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
     if (inside) {
-        let tri1 = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
-        if (tri1 > 0u && tri1 <= params.n_tri) {
-            let tri = tri1 - 1u;
-            let rot = rotations[layer];
-            let q0 = geometry[3u * tri];
-            let p0 = rot * q0.xyz;
-            let p1 = rot * geometry[3u * tri + 1u].xyz;
-            let p2 = rot * geometry[3u * tri + 2u].xyz;
-            let mat = bitcast<u32>(q0.w);
-            let px = -params.ext + (f32(col) + 0.5) * params.pix;
-            let py = params.ext - (f32(row) + 0.5) * params.pix;
-            // barycentrics of (px, py) in the projected triangle
-            let e1 = p1.xy - p0.xy;
-            let e2 = p2.xy - p0.xy;
-            let d = vec2<f32>(px, py) - p0.xy;
-            let den = e1.x * e2.y - e1.y * e2.x;
-            var ng = cross(p1 - p0, p2 - p0);
-            if (abs(den) > 0.0 && dot(ng, ng) > 0.0) {
-                covered = true;
-                let l1 = (d.x * e2.y - d.y * e2.x) / den;
-                let l2 = (e1.x * d.y - e1.y * d.x) / den;
-                let l0 = 1.0 - l1 - l2;
-                let pz = p0.z + l1 * (p1.z - p0.z) + l2 * (p2.z - p0.z);
-                let p = vec3<f32>(px, py, pz);
-                let wi = params.wi.xyz;
-                let wo = params.wo.xyz;
-                let sum_dir = wi + wo;
-                r0 = -0.5 * dot(p, sum_dir);
-                ng = normalize(ng);
-                if (ng.z < 0.0) {
-                    ng = -ng;
-                }
-                // range gradient across the pixel (plane z = z0 - (nx x + ny y) / nz)
-                let nz = max(ng.z, 1e-12);
-                let dzdx = -ng.x / nz;
-                let dzdy = -ng.y / nz;
-                wa = min(abs(0.5 * (sum_dir.x + sum_dir.z * dzdx)) * params.pix, params.max_extent);
-                wb = min(abs(0.5 * (sum_dir.y + sum_dir.z * dzdy)) * params.pix, params.max_extent);
-                var n = ng;
-                if (params.has_normals != 0u) {
-                    let base = 3u * params.n_tri + 3u * tri;
-                    let ns = l0 * geometry[base].xyz + l1 * geometry[base + 1u].xyz
-                        + l2 * geometry[base + 2u].xyz;
-                    n = safe_normalize(rot * ns, ng);
-                    if (dot(n, ng) < 0.0) {
-                        n = -n;
+        let n_s = SAMPLES;
+        var n_cov = 0u;
+        var r_sum = 0.0;
+        var w_big = vec2<f32>(0.0);
+        if (SAMPLES == 1u) {
+            // the pixel centre alone
+            let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
+            if (id > 0u && id <= params.n_tri) {
+                let x = -params.ext + (f32(col) + 0.5) * params.pix;
+                let y = params.ext - (f32(row) + 0.5) * params.pix;
+                let h = shade_at(id - 1u, layer, x, y, &out);
+                if (h.w != 0.0) {
+                    n_cov = 1u;
+                    r_sum = h.x;
+                    w_big = h.yz;
+                    var g: array<f32, 16>;
+                    for (var ch = 0u; ch < CHANNELS; ch++) {
+                        g[ch] = clamp(out[ch], -cap, cap);
+                    }
+                    if (WRITE_PROFILE && g[0] != 0.0) {
+                        add_profile(layer, h.x, h.y, h.z, &g);
                     }
                 }
-                let cos_i = dot(n, wi);
-                let cos_o = dot(n, wo);
-                var lit = cos_i > 0.0 && cos_o > 0.0;
-                if (SHADOWS && lit) {
-                    // rule 0: a facet turned away from the transmitter shadows itself
-                    lit = dot(ng, wi) > 0.0 && !in_shadow(tri, rot, p, p0, p1, p2, layer);
+            }
+        } else {
+            var ids: array<u32, 16>;
+            for (var k = 0u; k < n_s; k++) {
+                let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer * n_s + k), 0).x;
+                ids[k] = select(0u, id, id <= params.n_tri);
+            }
+            var done = 0u;
+            var c_big = 0u;
+            for (var k = 0u; k < n_s; k++) {
+                let id = ids[k];
+                if (id == 0u || (done & (1u << k)) != 0u) {
+                    continue;
                 }
-                if (lit) {
-                    // table coordinates (src/brdf/table.rs, bisector frame): b = bisector,
-                    // e_phi = normalize(n x b), e_theta = e_phi x b,
-                    // psi = atan2((wi - wo).e_phi, (wi - wo).e_theta), mirrored when < 0
-                    let b = safe_normalize(sum_dir, n);
-                    let cos_t = clamp(dot(n, b), 0.0, 1.0);
-                    let nxb = cross(n, b);
-                    let sin_t = length(nxb);
-                    var e_phi: vec3<f32>;
-                    if (sin_t > 1e-7) {
-                        e_phi = nxb / sin_t;
-                    } else {
-                        e_phi = any_perp(n);
+                var c = 0u;
+                var su = 0.0;
+                var sv = 0.0;
+                var lo = vec2<f32>(1.0);
+                var hi = vec2<f32>(0.0);
+                for (var k2 = k; k2 < n_s; k2++) {
+                    if (ids[k2] == id) {
+                        done |= 1u << k2;
+                        c += 1u;
+                        let o = params.offsets[k2].xy;
+                        su += o.x;
+                        sv += o.y;
+                        lo = min(lo, o);
+                        hi = max(hi, o);
                     }
-                    var psi = 0.0;
-                    var mirrored = false;
-                    if (params.beta > 0.0) {
-                        let e_theta = cross(e_phi, b);
-                        let tv = wi - wo;
-                        psi = atan2(dot(tv, e_phi), dot(tv, e_theta));
-                        if (psi < 0.0) {
-                            psi = -psi;
-                            mirrored = true;
-                        }
-                    }
-                    // z of the table grid: cot theta = s z / (1 - z)  =>  z = cos / (s sin + cos)
-                    var m: array<f32, 16>;
-                    for (var part = 0u; part < MAX_PARTS; part++) {
-                        let sw = tables[mat * HEADER_WORDS + part * 4u + 3u];
-                        let scale = abs(sw);
-                        let z = cos_t / max(scale * sin_t + cos_t, 1e-30);
-                        // cos_i / cos_t <= 2 cos(beta/2) while lit (1 at beta = 0)
-                        let w = select(cos_i, min(cos_i / max(cos_t, 1e-30), 2.0), sw < 0.0);
-                        add_part(mat, part, z, psi, w, &m);
-                    }
-                    if (mirrored) {
-                        for (var e = 1u; e < 16u; e++) {
-                            m[e] *= mirror_sign(e);
-                        }
-                    }
-                    // the table's beam bases: x = normalize(e_phi - (e_phi.w) w), y = k x x
-                    let k_in = -wi;
-                    let x_in = safe_normalize(e_phi - dot(e_phi, wi) * wi, any_perp(wi));
-                    let x_out = safe_normalize(e_phi - dot(e_phi, wo) * wo, any_perp(wo));
-                    let y_in = cross(k_in, x_in);
-                    let y_out = cross(wo, x_out);
-                    // telescope bases: x_in_t = normalize(k_in x Y), x_out_t = X (wo = Z)
-                    let x_in_t = normalize(cross(k_in, vec3<f32>(0.0, 1.0, 0.0)));
-                    let y_in_t = cross(k_in, x_in_t);
-                    let x_out_t = vec3<f32>(1.0, 0.0, 0.0);
-                    // S_sp_in = L(b_in) S_t_in: cos b_in = x_in.x_in_t, sin b_in = x_in.y_in_t
-                    let ai = double_angle(dot(x_in, x_in_t), dot(x_in, y_in_t));
-                    // S_t_out = L(b_out) S_sp_out: cos = x_out_t.x_out, sin = x_out_t.y_out
-                    let ao = double_angle(dot(x_out_t, x_out), dot(x_out_t, y_out));
-                    // M_t = L(ao) M L(ai), L(c, s) = [[1,0,0,0],[0,c,s,0],[0,-s,c,0],[0,0,0,1]]
-                    var tmp: array<f32, 16>;
-                    for (var i = 0u; i < 4u; i++) {
-                        let a1 = m[i * 4u + 1u];
-                        let a2 = m[i * 4u + 2u];
-                        tmp[i * 4u] = m[i * 4u];
-                        tmp[i * 4u + 1u] = a1 * ai.x - a2 * ai.y;
-                        tmp[i * 4u + 2u] = a1 * ai.y + a2 * ai.x;
-                        tmp[i * 4u + 3u] = m[i * 4u + 3u];
-                    }
-                    // (cos_i is in each part's weight, add_part)
-                    let k = 4.0 * PI * params.pix * params.pix;
-                    for (var j = 0u; j < 4u; j++) {
-                        let b1 = tmp[4u + j];
-                        let b2 = tmp[8u + j];
-                        out[j] = k * tmp[j];
-                        out[4u + j] = k * (ao.x * b1 + ao.y * b2);
-                        out[8u + j] = k * (-ao.y * b1 + ao.x * b2);
-                        out[12u + j] = k * tmp[12u + j];
-                    }
-                    if (CHANNELS < 16u) {
-                        let s = params.s_tx;
-                        var st: array<f32, 16>;
-                        for (var i = 0u; i < 4u; i++) {
-                            st[i] = out[i * 4u] * s.x + out[i * 4u + 1u] * s.y
-                                + out[i * 4u + 2u] * s.z + out[i * 4u + 3u] * s.w;
-                        }
-                        out = st;
-                    }
+                }
+                let x = -params.ext + (f32(col) + su / f32(c)) * params.pix;
+                let y = params.ext - (f32(row) + sv / f32(c)) * params.pix;
+                var g: array<f32, 16>;
+                let h = shade_at(id - 1u, layer, x, y, &g);
+                if (h.w == 0.0) {
+                    continue;
+                }
+                let frac = f32(c) / f32(n_s);
+                // the footprint of the part of the pixel its samples span (a whole pixel: 1)
+                let span = hi - lo + vec2<f32>(1.0 / f32(n_s));
+                let wab = span * h.yz;
+                n_cov += c;
+                r_sum += f32(c) * h.x;
+                if (c > c_big) {
+                    c_big = c;
+                    w_big = wab;
+                }
+                for (var ch = 0u; ch < CHANNELS; ch++) {
+                    g[ch] *= frac;
+                    out[ch] += g[ch];
+                    g[ch] = clamp(g[ch], -cap, cap);
+                }
+                if (WRITE_PROFILE && g[0] != 0.0) {
+                    add_profile(layer, h.x, wab.x, wab.y, &g);
                 }
             }
         }
@@ -522,44 +646,20 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
             }
         }
         if (WRITE_RANGE) {
-            let r_out = select(bitcast<f32>(0x7fc00000u), r0, covered);
+            let r_out = select(bitcast<f32>(0x7fc00000u), r_sum / f32(max(n_cov, 1u)), n_cov > 0u);
+            let cov = f32(n_cov) / f32(n_s);
             if (WRITE_FOOTPRINT) {
-                range_img[3u * pix_index] = r_out;
-                range_img[3u * pix_index + 1u] = wa;
-                range_img[3u * pix_index + 2u] = wb;
+                range_img[4u * pix_index] = r_out;
+                range_img[4u * pix_index + 1u] = w_big.x;
+                range_img[4u * pix_index + 2u] = w_big.y;
+                range_img[4u * pix_index + 3u] = cov;
             } else {
-                range_img[pix_index] = r_out;
+                range_img[2u * pix_index] = r_out;
+                range_img[2u * pix_index + 1u] = cov;
             }
         }
-        // bound every channel (|M_ij| <= M00) for the fixed-point sums
-        let cap = 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
         for (var c = 0u; c < CHANNELS; c++) {
             acc_out[c] = clamp(out[c], -cap, cap);
-        }
-        if (WRITE_PROFILE && covered && out[0] != 0.0) {
-            let half_w = 0.5 * (wa + wb) + params.support;
-            let lo = (r0 - half_w - params.r_min) / params.bin_width;
-            let hi = (r0 + half_w - params.r_min) / params.bin_width;
-            let k0 = u32(clamp(floor(lo), 0.0, f32(params.n_bins - 1u)));
-            let k1 = u32(clamp(floor(hi), 0.0, f32(params.n_bins - 1u)));
-            // the pulse's tails beyond the support fold into the end bins (weights sum to 1;
-            // twin: render::pulse::bin_weights_folded)
-            var c_prev = 0.0;
-            for (var kb = k0; kb <= k1; kb++) {
-                var c_next = 1.0;
-                if (kb < k1) {
-                    c_next = pulse_cdf_gauss_box2(params.r_min + f32(kb + 1u) * params.bin_width - r0,
-                                                  params.sigma, wa, wb);
-                }
-                let w = (c_next - c_prev) * params.fix_scale;
-                c_prev = c_next;
-                if (w != 0.0) {
-                    let base = (layer * params.n_bins + kb) * CHANNELS;
-                    for (var c = 0u; c < CHANNELS; c++) {
-                        fixed_add(base + c, w * acc_out[c], false);
-                    }
-                }
-            }
         }
     }
     if (WRITE_TOTAL) {

@@ -1,10 +1,16 @@
 // Visibility pass: orthographic rasterization of the mesh, one attitude per draw.
 //
-// Coordinates (see src/render/mod.rs): `rotations[i]` maps body-frame positions to the
-// view frame of this pass (x right, y up, z toward the viewer). The image square spans
+// Coordinates (see src/render/mod.rs): `transforms[i]` (rotation columns, then a
+// translation) maps body-frame positions to the view frame of this pass (x right, y up,
+// z toward the viewer). The image square spans
 // [-ext, ext] in x and y; depth maps z in [-ext_z, ext_z] to [1, 0] (nearest smallest).
 // The fragment writes the triangle index + 1 (0 = empty) to an R32Uint target.
-// CPU twin: `render::twin::visibility` (ray casting through pixel centres).
+// Visibility samples (src/render/gpu.rs, sample_offsets): instance l K + k draws attitude l
+// for sample k, whose offset (u, v) in the pixel (from its top-left corner, v down the
+// rows) is moved onto the pixel centre, where the rasterizer samples: the translation is
+// ((1/2 - u) pix, (v - 1/2) pix, 0) (built on the host, so the vertex stage costs one
+// affine map per vertex for any K). K = 1 samples the centre itself (no translation).
+// CPU twin: `render::twin::visibility` (ray casting through the same sample points).
 
 struct Params {
     ext: f32,
@@ -14,7 +20,7 @@ struct Params {
 }
 
 @group(0) @binding(0) var<storage, read> geometry: array<vec4<f32>>;
-@group(0) @binding(1) var<storage, read> rotations: array<mat3x3<f32>>;
+@group(0) @binding(1) var<storage, read> transforms: array<mat4x3<f32>>;
 @group(0) @binding(2) var<uniform> params: Params;
 
 struct VsOut {
@@ -24,7 +30,7 @@ struct VsOut {
 
 @vertex
 fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VsOut {
-    let p = rotations[ii] * geometry[vi].xyz;
+    let p = transforms[ii] * vec4<f32>(geometry[vi].xyz, 1.0);
     var out: VsOut;
     out.pos = vec4<f32>(p.x / params.ext, p.y / params.ext, 0.5 - 0.5 * p.z / params.ext_z, 1.0);
     out.tri = vi / 3u + 1u;

@@ -7,13 +7,17 @@ import numpy as np
 import trimesh
 
 
-def pixel_rays(ext: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Origins (n*n, 3) at z = 2 ext above the pixel centres (row-major, row 0 at +Y) and
-    directions along -Z: the receiver's orthographic rays."""
+def pixel_rays(ext: float, n: int, offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Origins at z = 2 ext above the pixel centres (n*n, 3; row-major, row 0 at +Y), or
+    above each pixel's sample points ``offsets`` (k, 2) ``(u, v)`` from its top-left corner,
+    ``v`` down the rows ((n*n*k, 3), pixel-major), and directions along -Z: the receiver's
+    orthographic rays."""
     pix = 2 * ext / n
-    x = -ext + (np.arange(n) + 0.5) * pix
-    y = ext - (np.arange(n) + 0.5) * pix
-    X, Y = np.meshgrid(x, y)
+    uv = np.array([[0.5, 0.5]]) if offsets is None else np.asarray(offsets, float)
+    j = np.arange(n)[None, :, None]
+    i = np.arange(n)[:, None, None]
+    X = -ext + (j + uv[None, None, :, 0]) * pix + 0 * i
+    Y = ext - (i + uv[None, None, :, 1]) * pix + 0 * j
     origins = np.stack([X.ravel(), Y.ravel(), np.full(X.size, 2 * ext)], axis=1)
     return origins, np.tile([0.0, 0.0, -1.0], (X.size, 1))
 

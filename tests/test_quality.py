@@ -33,8 +33,11 @@ def test_presets_against_the_f64_reference_and_ordered_by_accuracy():
     q = np.array([[1.0, 0, 0, 0], [0.9, 0.3, -0.2, 0.25]])
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     out = {}
+    # one visibility sample per pixel for all (the presets differ in it; this compares the
+    # shading, and with several samples a sample on the edge between two triangles moves
+    # the shading point by a fraction of a pixel when f32 and f64 decide it differently)
     for quality in ("fast", "balanced", "accurate", "reference"):
-        s = pprender.Lidar(resolution=48, quality=quality)
+        s = pprender.Lidar(resolution=48, quality=quality, pixel_samples=1)
         out[quality] = pprender.render(scene, s, q, outputs=("mueller", "profile", "range"))
     ref = out["reference"]
     assert ref.device.startswith("reference")
@@ -60,10 +63,14 @@ def test_reference_supersampling_and_stokes():
     s1 = pprender.Lidar(resolution=24, supersampling=2, quality="reference", polarization=[1, 1, 0, 0])
     r = pprender.render(scene, s1, q, outputs=("stokes", "profile", "range"))
     assert r.stokes.shape == (1, 24, 24, 4) and r.range.shape == (1, 24, 24)
-    g = pprender.render(scene, pprender.Lidar(resolution=24, supersampling=2, polarization=[1, 1, 0, 0]),
+    g = pprender.render(scene, pprender.Lidar(resolution=24, supersampling=2, polarization=[1, 1, 0, 0],
+                                              pixel_samples=16),
                         q, outputs=("stokes", "profile", "range"))
     np.testing.assert_allclose(r.pixel_size, g.pixel_size)
-    np.testing.assert_allclose(r.coverage, g.coverage)
+    # equal but for samples on an edge (one sample of 16 in one of 4 sub-pixels: 1/64)
+    d = r.coverage != g.coverage
+    assert d.mean() < 1e-2
+    np.testing.assert_allclose(np.abs(r.coverage - g.coverage)[d], 1 / 64)
     # tables + f32 against exact f64: 1e-3 of S0 (the first test bounds it per pixel)
     np.testing.assert_allclose(r.cross_section, g.cross_section, rtol=0, atol=1e-3 * g.cross_section[0, 0])
     np.testing.assert_allclose(r.profile.sum(axis=1), r.cross_section, rtol=0,
@@ -97,6 +104,11 @@ def test_table_overrides_change_the_tables_and_resolution_follows_the_preset():
         ({"table": {"n_z": 1}}, "table"),
         ({"table": {"n_z": 2.5}}, "table"),
         ({"table": 7}, "table"),
+        ({"pixel_samples": 3}, "pixel_samples"),
+        ({"pixel_samples": 32}, "pixel_samples"),
+        ({"pixel_samples": 0}, "pixel_samples"),
+        ({"pixel_samples": 4.0}, "pixel_samples"),
+        ({"pixel_samples": True}, "pixel_samples"),
     ],
 )
 def test_bad_quality_settings(kwargs, name):

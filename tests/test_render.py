@@ -189,31 +189,41 @@ def test_nose_on_cone_profile_is_a_linear_ramp():
 # ---------------------------------------------------------------------- trimesh
 
 
-@pytest.mark.parametrize("units", ["1U", "3U"])
-def test_coverage_and_range_match_trimesh_ray_casting(units):
+@pytest.mark.parametrize("units,k", [("1U", 1), ("3U", 1), ("3U", 8)])
+def test_coverage_and_range_match_trimesh_ray_casting(units, k):
+    """Coverage (the fraction of a pixel's visibility samples that hit) and range (their
+    mean) against embree rays cast through the same sample points."""
     mesh = models.cubesat(units=units, detail=3)
     mats = {p: pprender.Material("beckmann", alpha=0.3, eta=1.5 + 0j) for p in mesh.metadata["pprender_parts"]}
     scene = pprender.Scene(mesh, mats)
     rng = np.random.default_rng(7)
     q = rng.normal(size=(3, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    sensor = pprender.Lidar(resolution=96)
+    sensor = pprender.Lidar(resolution=96, pixel_samples=k)
     res = pprender.render(scene, sensor, q, outputs=("range",))
     rots = pprender._core.quaternions_to_rotations(q)
     n = 96
-    origins, dirs = raycast.pixel_rays(res.extent, n)
+    origins, dirs = raycast.pixel_rays(res.extent, n, pprender._core.sample_offsets(k))
     for i, R in enumerate(rots):
         loc, idx_ray, _ = raycast.rotated(mesh, R).ray.intersects_location(origins, dirs, multiple_hits=False)
-        want = np.full(n * n, np.nan)
-        want[idx_ray] = -loc[:, 2]
-        want = want.reshape(n, n)
-        got = res.range[i]
-        cov_t, cov_g = ~np.isnan(want), ~np.isnan(got)
-        # pixel centres on a silhouette edge may resolve either way: allow 0.5% of pixels
-        assert np.mean(cov_t != cov_g) < 5e-3
-        both = cov_t & cov_g
+        hit = np.zeros(n * n * k)
+        hit[idx_ray] = 1.0
+        r = np.zeros(n * n * k)
+        r[idx_ray] = -loc[:, 2]
+        cov_t = hit.reshape(n, n, k).mean(axis=2)
+        with np.errstate(invalid="ignore"):
+            want = r.reshape(n, n, k).sum(axis=2) / hit.reshape(n, n, k).sum(axis=2)
+        got, cov_g = res.range[i], res.coverage[i]
+        assert np.isnan(got).sum() == (cov_g == 0).sum()
+        # a sample on a silhouette edge may resolve either way (the rasterizer snaps vertices
+        # to 1/256 pixel): its pixel's coverage is then off by exactly one sample, 1/k;
+        # allow 0.5% of the pixels
+        diff = cov_t != cov_g
+        assert np.mean(diff) < 5e-3
+        np.testing.assert_allclose(np.abs(cov_t - cov_g)[diff], 1.0 / k, rtol=1e-6)
+        both = ~diff & (cov_t > 0)
         d = np.abs(got[both] - want[both])
-        # f32 ranges on the GPU; rare mismatches where two surfaces meet at a pixel centre
+        # f32 ranges on the GPU; rare mismatches where two surfaces meet at a sample point
         assert np.mean(d < 1e-5) > 0.995
         assert np.median(d) < 1e-6
 

@@ -6,7 +6,9 @@ report (``--write``: also to ``docs/render-benchmark.md``, or ``--write PATH``).
 Scene: the default 3U CubeSat of :func:`pprender.models.cubesat` (bus, deployed wings,
 antenna; about 12k triangles) with an aluminium bus (Beckmann alpha 0.15, single + double +
 multiple), glass-covered cells (alpha 0.05), white-painted panel backs and an aluminium
-antenna, monostatic at 1064 nm, 100 ps pulse, 128x128 pixels (and the same pulse as samples every
+antenna, monostatic at 1064 nm, 100 ps pulse, 128x128 pixels, one visibility sample per pixel
+(``pixel_samples=1``, the ``"fast"`` sampling; two rows show 4 and 8, the ``"balanced"``
+default, which rasterize once per sample) (and the same pulse as samples every
 5 ps, whose profile takes the sampled-pulse path: accumulated on the host in f64). A realization is one
 attitude. Rates are batch size / best wall time of ``--repeats`` calls of a batch of random
 attitudes; the one-off costs (device creation, shader compilation, material tables) are
@@ -78,7 +80,7 @@ def _memory_child(n: int, device: str) -> None:
     import resource
 
     scene = cubesat_scene()
-    sensor = pprender.Lidar(resolution=RES)
+    sensor = pprender.Lidar(resolution=RES, pixel_samples=1)
     q = random_quaternions(n)
     pprender.render(scene, sensor, q, outputs=("profile",), device=device)
     print(json.dumps({"n": n, "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
@@ -171,21 +173,25 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
     q = random_quaternions(batch)
     rows = []
     cases = [
-        ("full model: profile + Mueller image + range", pprender.Lidar(resolution=RES), ("profile", "mueller", "range")),
-        ("profile only (Mueller, 16 channels)", pprender.Lidar(resolution=RES), ("profile",)),
-        ("profile only (Stokes, horizontal transmit)", pprender.Lidar(resolution=RES, polarization=[1, 1, 0, 0]), ("profile",)),
-        ("cross-section only (Stokes)", pprender.Lidar(resolution=RES, polarization=[1, 1, 0, 0]), ()),
+        ("full model: profile + Mueller image + range", pprender.Lidar(resolution=RES, pixel_samples=1), ("profile", "mueller", "range")),
+        ("profile only (Mueller, 16 channels)", pprender.Lidar(resolution=RES, pixel_samples=1), ("profile",)),
+        ("profile only (Stokes, horizontal transmit)", pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0]), ("profile",)),
+        ("profile only (Stokes), 4 visibility samples per pixel", pprender.Lidar(
+            resolution=RES, polarization=[1, 1, 0, 0], pixel_samples=4), ("profile",)),
+        ("profile only (Stokes), 8 visibility samples per pixel", pprender.Lidar(
+            resolution=RES, polarization=[1, 1, 0, 0], pixel_samples=8), ("profile",)),
+        ("cross-section only (Stokes)", pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0]), ()),
         ("profile only (Stokes), sampled pulse: host accumulation", pprender.Lidar(
-            resolution=RES, polarization=[1, 1, 0, 0], pulse_samples=SAMPLED_PULSE, pulse_sample_spacing=5e-12,
+            resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0], pulse_samples=SAMPLED_PULSE, pulse_sample_spacing=5e-12,
         ), ("profile",)),
         ("profile only, intensity of an unpolarized transmitter (M00 alone)", pprender.Lidar(
-            resolution=RES, polarization=[1, 0, 0, 0], intensity_only=True), ("profile",)),
+            resolution=RES, pixel_samples=1, polarization=[1, 0, 0, 0], intensity_only=True), ("profile",)),
     ]
     # what the model's terms cost: the same request with single-bounce-only materials
     single_only = cubesat_scene(terms=("single",))
     single_only.prepare(0.0)
     special = [
-        ("profile only (Stokes), single bounce only", pprender.Lidar(resolution=RES, polarization=[1, 1, 0, 0]),
+        ("profile only (Stokes), single bounce only", pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0]),
          ("profile",)),
     ]
     t0 = time.perf_counter()
@@ -203,7 +209,7 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
     ours_stokes = float("nan")
     if with_mitsuba:
         single = cubesat_scene(terms=("single",))
-        s_sensor = pprender.Lidar(resolution=RES, polarization=[1, 0, 0, 0])
+        s_sensor = pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 0, 0, 0])
         pprender.render(single, s_sensor, np.array([[1.0, 0, 0, 0]]), outputs=("stokes",), device=device)
         ours_stokes, _ = best_time(
             lambda: pprender.render(single, s_sensor, np.array([[1.0, 0, 0, 0]]), outputs=("stokes",), device=device),

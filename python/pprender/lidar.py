@@ -193,6 +193,14 @@ class Lidar:
     1e-3 relative error of cross-sections for generic orientations (edges aligned with the
     pixel grid alias more; docs/render-accuracy.md).
     ``supersampling``: sub-pixels per pixel side for visibility and the profile.
+    ``pixel_samples``: visibility samples per (sub-)pixel, 1, 2, 4, 8 or 16 (default: the
+    quality preset's). The pixel's area is shared among the surfaces its samples see, each
+    shaded once at the mean of its samples (a (0, m, 2)-net: one sample in each of the
+    ``K`` rows and columns of the pixel, so an edge's coverage is resolved to ``1/K`` of a
+    pixel, and a sliver thinner than a pixel is still seen); pixels that see one surface
+    cost one shading as with ``1``. This is what makes silhouettes, panel edges and thin
+    parts area-correct (docs/render-accuracy.md); ``supersampling`` refines everything at
+    ``supersampling^2`` times the cost.
     ``quality``: the speed/accuracy dial (:data:`QUALITY`; docs/tradeoff.md measures each):
     ``"fast"`` (coarse BRDF tables, pixels half the range FWHM across), ``"balanced"``
     (the default grids and resolution), ``"accurate"`` (fine tables, double bounce at
@@ -201,7 +209,7 @@ class Lidar:
     individual overrides of the preset's BRDF table grid, a mapping with any of ``n_z``,
     ``n_psi`` (single term), ``n_z_lambertian``, ``n_psi_lambertian`` (multiple + diffuse),
     ``n_z_double``, ``n_psi_double``, ``double_order`` (:func:`pprender.brdf_table`).
-    ``resolution`` and ``supersampling`` given explicitly override the preset's.
+    ``resolution`` and ``pixel_samples`` given explicitly override the preset's.
     ``intensity_only``: with a ``polarization``, compute only the received intensity ``S0``
     (``"intensity"`` images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel
     then looks up only the Mueller elements it needs (``M00`` alone for an unpolarized
@@ -218,6 +226,7 @@ class Lidar:
     bistatic_angle: float = 0.0
     polarization: Sequence[float] | None = None
     supersampling: int = 1
+    pixel_samples: int | None = None
     pulse_samples: Sequence[float] | None = None
     pulse_sample_spacing: float | None = None
     quality: str = "balanced"
@@ -258,6 +267,11 @@ class Lidar:
             raise Error(f"invalid resolution = {self.resolution!r}: an integer in [1, 8192]")
         if not isinstance(self.supersampling, (int, np.integer)) or not 1 <= self.supersampling <= 64:
             raise Error(f"invalid supersampling = {self.supersampling!r}: an integer in [1, 64]")
+        k = self.pixel_samples
+        if k is not None and (
+            not isinstance(k, (int, np.integer)) or isinstance(k, bool) or k not in (1, 2, 4, 8, 16)
+        ):
+            raise Error(f"invalid pixel_samples = {k!r}: visibility samples per pixel, one of 1, 2, 4, 8, 16")
         b = self.bistatic_angle
         if not (isinstance(b, (int, float)) and 0.0 <= b < math.pi / 2):
             raise Error(f"invalid bistatic_angle = {b!r}: radians in [0, pi/2)")
@@ -342,6 +356,12 @@ class Lidar:
         n = math.ceil(2.0 * radius / (self.range_fwhm / q["pixels_per_fwhm"]))
         return int(min(1024, max(q["min_resolution"], n)))
 
+    def effective_pixel_samples(self) -> int:
+        """Visibility samples per pixel: ``pixel_samples``, or the quality preset's."""
+        if self.pixel_samples is not None:
+            return int(self.pixel_samples)
+        return int(QUALITY[self.quality]["pixel_samples"])
+
     def table_options(self) -> dict[str, int]:
         """The BRDF table grid the renderer uses: the preset's, then ``table``'s overrides
         (keys absent: the defaults of :func:`pprender.brdf_table`)."""
@@ -359,8 +379,8 @@ class RenderResult:
     bin, summing over bins to ``cross_section``; ``range_axis`` (B,) bin centres (m),
     ``bin_edges`` (B+1,), ``time_axis`` (B,) round-trip delays ``2 r / c`` (s).
     ``mueller`` (N, H, W, 4, 4) / ``stokes`` (N, H, W, 4) / ``intensity`` (N, H, W): m^2 per pixel. ``range``
-    (N, H, W) metres, NaN where nothing is seen; ``coverage`` (N, H, W) the covered
-    fraction of each pixel's sub-pixels.
+    (N, H, W) metres, the mean over the pixel's covered visibility samples, NaN where
+    nothing is seen; ``coverage`` (N, H, W) the covered fraction of its samples.
     """
 
     cross_section: np.ndarray
@@ -397,18 +417,19 @@ _TABLE_KEYS = ("n_z", "n_psi", "n_z_lambertian", "n_psi_lambertian", "n_z_double
 #: The quality presets of :class:`Lidar` (``quality=``): BRDF table grids (keywords of
 #: :func:`pprender.brdf_table`; absent keys take its defaults: single n_z 256 / n_psi 32,
 #: multiple + diffuse 256 / 8, double 32 / 8 at order 48) and the default image
-#: resolution (pixels across one range FWHM). ``"reference"`` renders on the CPU in f64
+#: resolution (pixels across one range FWHM) and visibility samples per pixel.
+#: ``"reference"`` renders on the CPU in f64
 #: with exact BRDFs (no tables). Their cost and error are measured in docs/tradeoff.md.
 QUALITY: dict[str, dict[str, Any]] = {
     "fast": {"table": {"n_z": 64, "n_psi": 16, "n_z_lambertian": 64, "n_psi_lambertian": 4,
                        "n_z_double": 16, "n_psi_double": 4, "double_order": 32},
-             "pixels_per_fwhm": 2.0, "min_resolution": 32},
-    "balanced": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64},
+             "pixels_per_fwhm": 2.0, "min_resolution": 32, "pixel_samples": 1},
+    "balanced": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64, "pixel_samples": 8},
     "accurate": {"table": {"n_z": 1024, "n_psi": 64, "n_z_lambertian": 512,
                            "n_psi_lambertian": 16, "n_z_double": 64, "n_psi_double": 16,
                            "double_order": 96},
-                 "pixels_per_fwhm": 8.0, "min_resolution": 64},
-    "reference": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64},
+                 "pixels_per_fwhm": 8.0, "min_resolution": 64, "pixel_samples": 16},
+    "reference": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64, "pixel_samples": 16},
 }
 
 
@@ -491,6 +512,7 @@ def render(
         rot,
         resolution=res,
         supersampling=int(sensor.supersampling),
+        samples=sensor.effective_pixel_samples(),
         bistatic_angle=float(sensor.bistatic_angle),
         polarization=pol,
         intensity_only=bool(sensor.intensity_only),

@@ -172,7 +172,7 @@ impl PyRenderScene {
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
     /// `device = "reference"`: the f64 CPU reference (`twin::render_reference`, exact
     /// BRDFs, no tables; the table keywords are then unused).
-    #[pyo3(signature = (rotations, *, resolution, supersampling, bistatic_angle, polarization,
+    #[pyo3(signature = (rotations, *, resolution, supersampling, samples, bistatic_angle, polarization,
         intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
         pulse_spacing=0.0, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
@@ -184,6 +184,7 @@ impl PyRenderScene {
         rotations: PyReadonlyArray3<'py, f64>,
         resolution: usize,
         supersampling: usize,
+        samples: usize,
         bistatic_angle: f64,
         polarization: Option<[f64; 4]>,
         intensity_only: bool,
@@ -240,6 +241,7 @@ impl PyRenderScene {
         let sensor = SensorSetup {
             resolution,
             supersampling,
+            samples,
             bistatic_angle,
             polarization,
             intensity_only,
@@ -304,6 +306,20 @@ impl PyRenderScene {
     }
 }
 
+/// The `k` visibility samples of a pixel, (k, 2) `(u, v)` in pixel units from its top-left
+/// corner, `v` down the rows (`crate::render::gpu::sample_offsets`).
+#[pyfunction]
+fn sample_offsets<'py>(py: Python<'py>, k: usize) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+    if !(k.is_power_of_two() && k <= crate::render::gpu::MAX_SAMPLES) {
+        return Err(crate::Error::param("pixel_samples", k, "one of 1, 2, 4, 8, 16").into());
+    }
+    let v: Vec<Vec<f64>> = crate::render::gpu::sample_offsets(k)
+        .into_iter()
+        .map(|p| p.to_vec())
+        .collect();
+    Ok(numpy::PyArray2::from_vec2(py, &v).expect("rectangular"))
+}
+
 /// Rotation matrices (n, 3, 3) from (n, 4) quaternions `(w, x, y, z)`.
 #[pyfunction]
 fn quaternions_to_rotations<'py>(
@@ -355,6 +371,7 @@ fn device_info<'py>(py: Python<'py>, device: &str) -> PyResult<Bound<'py, PyDict
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderScene>()?;
     m.add_function(wrap_pyfunction!(quaternions_to_rotations, m)?)?;
+    m.add_function(wrap_pyfunction!(sample_offsets, m)?)?;
     m.add_function(wrap_pyfunction!(device_info, m)?)?;
     Ok(())
 }

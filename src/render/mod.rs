@@ -19,8 +19,12 @@
 //! radius of the mesh's bounding sphere about the body origin (so every attitude fits).
 //! Row 0 is the top (`Y = +ext`), column 0 the left (`X = -ext`); pixel `(i, j)` has its
 //! centre at `X = -ext + (j + 1/2) delta`, `Y = ext - (i + 1/2) delta`, `delta = 2 ext / W`.
-//! Visibility is sampled at pixel centres (rasterization); a pixel counts fully for its
-//! centre's triangle.
+//! Visibility is sampled (rasterization) at `K` points of each pixel (`samples`, a power
+//! of two up to 16; [`gpu::sample_offsets`]: a (0, m, 2)-net, `K = 1` the centre). Each
+//! triangle seen by `c` of them counts for `c / K` of the pixel's area and is shaded once,
+//! at the mean of its samples' points; a pixel whose samples all see one triangle is
+//! shaded at its centre for its whole area. The coverage output is the covered fraction
+//! of the samples, the range their mean.
 //!
 //! **Illumination and cast shadows.** A visible point is lit when `cos(theta_i) > 0` and
 //! `cos(theta_o) > 0` (shading normal) and, bistatic (`beta > 0`), it is not in the
@@ -63,7 +67,9 @@
 //! `dA cos(theta_o) = delta^2`). Lambertian sphere check: `sigma = 8/3 pi a^2 rho`.
 //!
 //! **Profile.** Within a pixel the range is `r0 + gx u + gy v` (its plane; `u, v` across
-//! the pixel), a trapezoid of widths `a = |gx| delta`, `b = |gy| delta`; convolved with
+//! the pixel), a trapezoid of widths `a = |gx| delta`, `b = |gy| delta` (for a triangle
+//! seen by `c` of `K` samples: at their mean point, widths scaled by the extent of those
+//! samples across the pixel in `u` and `v`, `max - min + 1/K`); convolved with
 //! the received pulse (range FWHM `c tau / 2`) and integrated over each bin
 //! ([`pulse`]). The bins cover the bounding sphere plus the pulse support, so the weights
 //! of every pixel sum to one and the profile sums to the total cross-section. Bin edges
@@ -119,6 +125,16 @@ pub fn check_sensor(s: &gpu::SensorSetup) -> Result<()> {
             "supersampling",
             s.supersampling,
             format!("an integer >= 1 with resolution x supersampling <= {MAX_IMAGE_SIDE}"),
+        ));
+    }
+    if !(s.samples.is_power_of_two() && s.samples <= gpu::MAX_SAMPLES) {
+        return Err(Error::param(
+            "samples",
+            s.samples,
+            format!(
+                "visibility samples per pixel: 1, 2, 4, 8 or {}",
+                gpu::MAX_SAMPLES
+            ),
         ));
     }
     if !(s.bistatic_angle >= 0.0 && s.bistatic_angle < 0.5 * std::f64::consts::PI) {

@@ -18,7 +18,16 @@ use std::f64::consts::PI;
 /// Triangle index + 1 seen at each pixel centre (0: empty), row-major `width x width`.
 /// Ties (a centre on a shared edge) may resolve differently from the GPU's rasterizer.
 pub fn visibility(mesh: &Mesh, rot: &Rot, width: usize, ext: f64) -> Vec<u32> {
+    visibility_at(mesh, rot, width, ext, [0.5, 0.5])
+}
+
+/// Triangle index + 1 seen at the point `(u, v)` of each pixel (pixel units from its
+/// top-left corner, `v` down the rows: `X = -ext + (j + u) delta`, `Y = ext - (i + v)
+/// delta`), row-major `width x width` (0: empty). Twin of `shaders/visibility.wgsl` for
+/// one visibility sample ([`crate::render::gpu::sample_offsets`]).
+pub fn visibility_at(mesh: &Mesh, rot: &Rot, width: usize, ext: f64, uv: [f64; 2]) -> Vec<u32> {
     let pix = 2.0 * ext / width as f64;
+    let [u, v] = uv;
     let mut ids = vec![0u32; width * width];
     let mut depth = vec![f64::NEG_INFINITY; width * width];
     for (t, f) in mesh.faces.iter().enumerate() {
@@ -36,17 +45,17 @@ pub fn visibility(mesh: &Mesh, rot: &Rot, width: usize, ext: f64) -> Vec<u32> {
             p.iter().map(|v| v[1]).fold(f64::INFINITY, f64::min),
             p.iter().map(|v| v[1]).fold(f64::NEG_INFINITY, f64::max),
         );
-        let j0 = (((xmin + ext) / pix - 0.5).ceil().max(0.0)) as usize;
-        let j1 = (((xmax + ext) / pix - 0.5).floor().min(width as f64 - 1.0)) as isize;
-        let i0 = (((ext - ymax) / pix - 0.5).ceil().max(0.0)) as usize;
-        let i1 = (((ext - ymin) / pix - 0.5).floor().min(width as f64 - 1.0)) as isize;
+        let j0 = (((xmin + ext) / pix - u).ceil().max(0.0)) as usize;
+        let j1 = (((xmax + ext) / pix - u).floor().min(width as f64 - 1.0)) as isize;
+        let i0 = (((ext - ymax) / pix - v).ceil().max(0.0)) as usize;
+        let i1 = (((ext - ymin) / pix - v).floor().min(width as f64 - 1.0)) as isize;
         if j1 < 0 || i1 < 0 {
             continue;
         }
         for i in i0..=(i1 as usize) {
-            let y = ext - (i as f64 + 0.5) * pix;
+            let y = ext - (i as f64 + v) * pix;
             for j in j0..=(j1 as usize) {
-                let x = -ext + (j as f64 + 0.5) * pix;
+                let x = -ext + (j as f64 + u) * pix;
                 let (dx, dy) = (x - p[0][0], y - p[0][1]);
                 let l1 = (dx * (p[2][1] - p[0][1]) - dy * (p[2][0] - p[0][0])) / den;
                 let l2 = ((p[1][0] - p[0][0]) * dy - (p[1][1] - p[0][1]) * dx) / den;
@@ -93,10 +102,27 @@ pub fn shade_pixel(
     beta: f64,
     brdf: &BrdfFn<'_>,
 ) -> Option<PixelSample> {
-    let f = mesh.faces[tri];
-    let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
     let x = -lay.ext + (col as f64 + 0.5) * lay.pix;
     let y = lay.ext - (row as f64 + 0.5) * lay.pix;
+    shade_point(mesh, rot, tri, x, y, lay, beta, brdf)
+}
+
+/// Shade the point `(x, y)` (telescope frame, m) of triangle `tri`: the differential
+/// cross-section of a whole pixel there, with its range and the pixel's footprint widths
+/// (f64 twin of `shade_at` in `shade.wgsl`); `None` if `tri` is degenerate in projection.
+#[allow(clippy::too_many_arguments)]
+pub fn shade_point(
+    mesh: &Mesh,
+    rot: &Rot,
+    tri: usize,
+    x: f64,
+    y: f64,
+    lay: &Layout,
+    beta: f64,
+    brdf: &BrdfFn<'_>,
+) -> Option<PixelSample> {
+    let f = mesh.faces[tri];
+    let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
     let den = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
     if den == 0.0 {
         return None;
@@ -283,77 +309,118 @@ pub fn render_cpu(
     let edges: Vec<f64> = (0..=nb)
         .map(|k| lay.r_min + k as f64 * sensor.bin_width)
         .collect();
-    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>)> = rotations
+    #[allow(clippy::type_complexity)]
+    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>)> = rotations
         .par_iter()
         .map(|rot| {
-            let ids = visibility(mesh, rot, w, lay.ext);
+            let offsets = super::gpu::sample_offsets(sensor.samples);
+            let n_s = offsets.len();
+            let ids: Vec<Vec<u32>> = offsets
+                .iter()
+                .map(|&uv| visibility_at(mesh, rot, w, lay.ext, uv))
+                .collect();
             let beta = sensor.bistatic_angle;
             let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
             let mut img = vec![0.0f32; w * w * ch];
             let mut rng = vec![f32::NAN; w * w];
+            let mut cov = vec![0.0f32; w * w];
             let mut prof = vec![0.0f64; nb * ch];
             let mut tot = vec![0.0f64; ch];
             let mut weights = vec![0.0f64; nb];
-            for (k, &id) in ids.iter().enumerate() {
-                if id == 0 {
-                    continue;
-                }
+            for k in 0..w * w {
                 let (row, col) = (k / w, k % w);
-                let Some(mut s) =
-                    shade_pixel(mesh, rot, id as usize - 1, row, col, &lay, beta, brdf)
-                else {
-                    continue;
-                };
-                // cast shadow: the pixel stays covered (range reported) but returns nothing
-                if let Some(tx) = &tx {
-                    let lit = s.mueller.iter().flatten().any(|&v| v != 0.0);
-                    if lit && shadowed(tx, id as usize - 1, s.point) {
-                        s.mueller = [[0.0; 4]; 4];
+                // the pixel's samples grouped by triangle, in the order of their first sample
+                // (id, count, sum u, sum v, [min u, max u, min v, max v])
+                #[allow(clippy::type_complexity)]
+                let mut groups: Vec<(u32, usize, f64, f64, [f64; 4])> = Vec::new();
+                for (s_ids, uv) in ids.iter().zip(&offsets) {
+                    let id = s_ids[k];
+                    if id == 0 {
+                        continue;
                     }
-                }
-                rng[k] = s.range as f32;
-                let vals: Vec<f64> = match sensor.polarization {
-                    None => (0..16).map(|e| s.mueller[e / 4][e % 4]).collect(),
-                    Some(st) => (0..ch)
-                        .map(|i| (0..4).map(|j| s.mueller[i][j] * st[j]).sum())
-                        .collect(),
-                };
-                for c in 0..ch {
-                    img[k * ch + c] = vals[c] as f32;
-                    tot[c] += vals[c];
-                }
-                if outputs.profile && vals[0] != 0.0 {
-                    match &sensor.pulse {
-                        Some(p) => {
-                            p.bin_weights(s.range, s.widths.0, s.widths.1, &edges, &mut weights)
+                    match groups.iter_mut().find(|g| g.0 == id) {
+                        Some(g) => {
+                            g.1 += 1;
+                            g.2 += uv[0];
+                            g.3 += uv[1];
+                            g.4 = [
+                                g.4[0].min(uv[0]),
+                                g.4[1].max(uv[0]),
+                                g.4[2].min(uv[1]),
+                                g.4[3].max(uv[1]),
+                            ];
                         }
-                        None => pulse::bin_weights_folded(
-                            s.range,
-                            s.widths.0,
-                            s.widths.1,
-                            sensor.sigma_range,
-                            lay.support + 0.5 * (s.widths.0 + s.widths.1),
-                            &edges,
-                            &mut weights,
-                        ),
+                        None => groups.push((id, 1, uv[0], uv[1], [uv[0], uv[0], uv[1], uv[1]])),
                     }
-                    for (b, &wt) in weights.iter().enumerate() {
-                        if wt != 0.0 {
-                            for c in 0..ch {
-                                prof[b * ch + c] += wt * vals[c];
+                }
+                let (mut n_cov, mut r_sum) = (0usize, 0.0f64);
+                let mut pixel = vec![0.0f64; ch];
+                for &(id, c, su, sv, ext) in &groups {
+                    let tri = id as usize - 1;
+                    let x = -lay.ext + (col as f64 + su / c as f64) * lay.pix;
+                    let y = lay.ext - (row as f64 + sv / c as f64) * lay.pix;
+                    let Some(mut s) = shade_point(mesh, rot, tri, x, y, &lay, beta, brdf) else {
+                        continue;
+                    };
+                    // cast shadow: the point stays covered (range reported) but returns nothing
+                    if let Some(tx) = &tx {
+                        let lit = s.mueller.iter().flatten().any(|&v| v != 0.0);
+                        if lit && shadowed(tx, tri, s.point) {
+                            s.mueller = [[0.0; 4]; 4];
+                        }
+                    }
+                    let frac = c as f64 / n_s as f64;
+                    // the footprint of the part of the pixel the samples span (whole: 1)
+                    let span_u = ext[1] - ext[0] + 1.0 / n_s as f64;
+                    let span_v = ext[3] - ext[2] + 1.0 / n_s as f64;
+                    n_cov += c;
+                    r_sum += c as f64 * s.range;
+                    let vals: Vec<f64> = match sensor.polarization {
+                        None => (0..16).map(|e| frac * s.mueller[e / 4][e % 4]).collect(),
+                        Some(st) => (0..ch)
+                            .map(|i| frac * (0..4).map(|j| s.mueller[i][j] * st[j]).sum::<f64>())
+                            .collect(),
+                    };
+                    for c in 0..ch {
+                        pixel[c] += vals[c];
+                    }
+                    if outputs.profile && vals[0] != 0.0 {
+                        let (a, b) = (span_u * s.widths.0, span_v * s.widths.1);
+                        match &sensor.pulse {
+                            Some(p) => p.bin_weights(s.range, a, b, &edges, &mut weights),
+                            None => pulse::bin_weights_folded(
+                                s.range,
+                                a,
+                                b,
+                                sensor.sigma_range,
+                                lay.support + 0.5 * (a + b),
+                                &edges,
+                                &mut weights,
+                            ),
+                        }
+                        for (b, &wt) in weights.iter().enumerate() {
+                            if wt != 0.0 {
+                                for c in 0..ch {
+                                    prof[b * ch + c] += wt * vals[c];
+                                }
                             }
                         }
                     }
                 }
+                if n_cov > 0 {
+                    rng[k] = (r_sum / n_cov as f64) as f32;
+                    cov[k] = (n_cov as f64 / n_s as f64) as f32;
+                }
+                for c in 0..ch {
+                    img[k * ch + c] = pixel[c] as f32;
+                    tot[c] += pixel[c];
+                }
             }
-            (img, rng, prof, tot)
+            (img, rng, prof, tot, cov)
         })
         .collect();
     let n = rotations.len();
-    let cov: Vec<f32> = per
-        .iter()
-        .flat_map(|p| p.1.iter().map(|x| if x.is_nan() { 0.0 } else { 1.0 }))
-        .collect();
+    let cov: Vec<f32> = per.iter().flat_map(|p| p.4.clone()).collect();
     Rendered {
         n,
         height: w,
@@ -403,7 +470,8 @@ pub fn render_reference(
         if let Some(rng) = r.range.as_mut() {
             let mut out = vec![0.0f32; n * res * res];
             let mut cov = vec![0.0f32; n * res * res];
-            super::gpu::downsample_range(rng, n, w, ss, &mut out, &mut cov);
+            let c0 = r.coverage.take().expect("coverage with the range");
+            super::gpu::downsample_range(rng, &c0, n, w, ss, &mut out, &mut cov);
             *rng = out;
             r.coverage = Some(cov);
         }
