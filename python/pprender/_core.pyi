@@ -276,6 +276,7 @@ class RenderScene:
         *,
         resolution: int,
         supersampling: int,
+        samples: int,
         bistatic_angle: float,
         polarization: Sequence[float] | None,
         intensity_only: bool,
@@ -297,4 +298,5 @@ class RenderScene:
     ) -> dict[str, Any]: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+def sample_offsets(k: int) -> npt.NDArray[np.float64]: ...
 def device_info(device: str = "auto") -> dict[str, Any]: ...
