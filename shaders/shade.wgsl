@@ -59,8 +59,8 @@ override SHADOWS: bool = false;    // transmitter cast shadows (beta > 0), see a
 // zero. Set from what the output needs (SensorSetup::element_mask in src/render/gpu.rs:
 // an unpolarized transmitter's intensity needs M00 alone).
 override ELEMENT_MASK: u32 = 0xffffu;
-// Visibility samples per pixel K (= params.samples; a constant so that K = 1 compiles to
-// the single-sample kernel).
+// Visibility samples per pixel K (SensorSetup::samples; a constant so that K = 1 compiles
+// to the single-sample kernel).
 override SAMPLES: u32 = 1u;
 
 const PI: f32 = 3.14159265358979;
@@ -88,8 +88,9 @@ struct Params {
     beta: f32,         // bistatic angle (rad)
     max_extent: f32,   // cap on the sub-pixel range widths (m)
     tx_width: u32,     // side of the transmitter's id map (texels; SHADOWS only)
-    samples: u32,      // visibility samples per pixel K: layers l K .. l K + K - 1 of tri_ids
-    offsets: array<vec4<f32>, 16>, // their (u, v) in the pixel (from its top-left corner)
+    _pad0: u32,
+    offsets: array<vec4<f32>, 16>, // the SAMPLES visibility samples' (u, v) in the pixel
+                                   // (from its top-left corner; tri_ids layers l K .. l K + K - 1)
 }
 
 @group(0) @binding(0) var tri_ids: texture_2d_array<u32>;

@@ -310,9 +310,7 @@ impl PyRenderScene {
 /// corner, `v` down the rows (`crate::render::gpu::sample_offsets`).
 #[pyfunction]
 fn sample_offsets<'py>(py: Python<'py>, k: usize) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
-    if !(k.is_power_of_two() && k <= crate::render::gpu::MAX_SAMPLES) {
-        return Err(crate::Error::param("pixel_samples", k, "one of 1, 2, 4, 8, 16").into());
-    }
+    crate::render::check_samples(k)?;
     let v: Vec<Vec<f64>> = crate::render::gpu::sample_offsets(k)
         .into_iter()
         .map(|p| p.to_vec())

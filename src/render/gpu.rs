@@ -391,9 +391,9 @@ pub struct ShadeParams {
     pub max_extent: f32,
     /// Side of the transmitter's id map (texels; bistatic only).
     pub tx_width: u32,
-    /// Visibility samples per pixel ([`SensorSetup::samples`]).
-    pub samples: u32,
-    /// Their offsets in the pixel `(u, v, 0, 0)` ([`sample_offsets`]; the first `samples`).
+    pub _pad: u32,
+    /// The visibility samples' offsets in the pixel `(u, v, 0, 0)` ([`sample_offsets`]; the
+    /// first [`SensorSetup::samples`], which the kernel has as the constant `SAMPLES`).
     pub offsets: [[f32; 4]; MAX_SAMPLES],
 }
 
@@ -425,8 +425,11 @@ pub fn sample_offsets(k: usize) -> Vec<[f64; 2]> {
     let dir = [1u32, 3, 5, 15];
     (0..k as u32)
         .map(|i| {
-            let u = i.reverse_bits() >> (32 - m.max(1));
-            let u = if m == 0 { 0 } else { u };
+            let u = if m == 0 {
+                0
+            } else {
+                i.reverse_bits() >> (32 - m)
+            };
             let mut v = 0u32;
             for b in 0..m {
                 if i >> b & 1 == 1 {
@@ -855,7 +858,7 @@ pub fn render(
         beta: beta as f32,
         max_extent: lay.max_extent as f32,
         tx_width: tx_w as u32,
-        samples: sensor.samples as u32,
+        _pad: 0,
         offsets: gpu_offsets(sensor.samples),
     };
     let fix_scale = params.fix_scale as f64; // what the kernel uses
@@ -1544,6 +1547,31 @@ pub(crate) mod tests {
         d
     }
 
+    /// [`lambert_part`] packed as the one material's only part (bistatic angle `beta`).
+    pub fn lambert_tables(rho: f64, beta: f64) -> GpuTables {
+        let data = lambert_part(rho, 4);
+        GpuTables::pack(
+            &[vec![PartRef {
+                scale: 1.0,
+                n_z: 4,
+                n_psi: 0,
+                data: &data,
+                cos_weighted: false,
+            }]],
+            beta,
+        )
+        .unwrap()
+    }
+
+    /// The Lambertian BRDF `rho / pi` (M00 alone) for the twin.
+    pub fn lambert_brdf(rho: f64) -> impl Fn(usize, [f64; 3], [f64; 3]) -> [[f64; 4]; 4] + Sync {
+        move |_m, _wi, _wo| {
+            let mut m = [[0.0; 4]; 4];
+            m[0][0] = rho / std::f64::consts::PI;
+            m
+        }
+    }
+
     pub fn lambert_sensor(res: usize) -> SensorSetup {
         SensorSetup {
             resolution: res,
@@ -1567,18 +1595,7 @@ pub(crate) mod tests {
         let a = 0.5;
         let rho = 0.7;
         let mesh = uv_sphere(a, 64, 128);
-        let data = lambert_part(rho, 4);
-        let tables = GpuTables::pack(
-            &[vec![PartRef {
-                scale: 1.0,
-                n_z: 4,
-                n_psi: 0,
-                data: &data,
-                cos_weighted: false,
-            }]],
-            0.0,
-        )
-        .unwrap();
+        let tables = lambert_tables(rho, 0.0);
         let sensor = lambert_sensor(128);
         let rot = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
         let out = Outputs {
@@ -1587,11 +1604,7 @@ pub(crate) mod tests {
             profile: true,
         };
         let g = render(&gpu, &mesh, &tables, &sensor, &rot, out).unwrap();
-        let brdf = |_m: usize, _wi: [f64; 3], _wo: [f64; 3]| {
-            let mut m = [[0.0; 4]; 4];
-            m[0][0] = rho / std::f64::consts::PI;
-            m
-        };
+        let brdf = lambert_brdf(rho);
         let c = twin::render_cpu(&mesh, &sensor, &rot, out, &brdf);
         let analytic = 8.0 / 3.0 * std::f64::consts::PI * a * a * rho;
         let (tg, tc) = (g.total[0], c.total[0]);
@@ -1739,7 +1752,7 @@ mod twin_tests {
 
 #[cfg(test)]
 mod shadow_tests {
-    use super::tests::{lambert_part, lambert_sensor, uv_sphere};
+    use super::tests::{lambert_brdf, lambert_sensor, lambert_tables, uv_sphere};
     use super::*;
     use crate::render::twin;
 
@@ -1789,12 +1802,7 @@ mod shadow_tests {
         let gpu = context(DeviceChoice::Auto).expect("a Vulkan device (lavapipe)");
         let mesh = sphere_and_plate();
         let rho = 0.5;
-        let data = lambert_part(rho, 4);
-        let brdf = |_m: usize, _wi: [f64; 3], _wo: [f64; 3]| {
-            let mut m = [[0.0; 4]; 4];
-            m[0][0] = rho / std::f64::consts::PI;
-            m
-        };
+        let brdf = lambert_brdf(rho);
         let rots = crate::render::geometry::rotations_from_quaternions(&[
             [1.0, 0.0, 0.0, 0.0],
             [0.15f64.cos(), 0.0, 0.0, 0.15f64.sin()], // 0.3 rad about the line of sight
@@ -1807,17 +1815,7 @@ mod shadow_tests {
         };
         for beta_deg in [20.0f64, 40.0, 60.0] {
             let beta = beta_deg.to_radians();
-            let tables = GpuTables::pack(
-                &[vec![PartRef {
-                    scale: 1.0,
-                    n_z: 4,
-                    n_psi: 0,
-                    data: &data,
-                    cos_weighted: false,
-                }]],
-                beta,
-            )
-            .unwrap();
+            let tables = lambert_tables(rho, beta);
             let mut sensor = lambert_sensor(128);
             sensor.bistatic_angle = beta;
             let g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
@@ -1917,7 +1915,7 @@ mod shadow_tests {
 #[cfg(test)]
 mod sample_tests {
     use super::shadow_tests::sphere_and_plate;
-    use super::tests::{lambert_part, lambert_sensor};
+    use super::tests::{lambert_brdf, lambert_sensor, lambert_tables};
     use super::*;
     use crate::render::twin;
 
@@ -1956,12 +1954,7 @@ mod sample_tests {
     fn samples_kernel_matches_twin() {
         let gpu = context(DeviceChoice::Auto).expect("a Vulkan device (lavapipe)");
         let rho = 0.5;
-        let data = lambert_part(rho, 4);
-        let brdf = |_m: usize, _wi: [f64; 3], _wo: [f64; 3]| {
-            let mut m = [[0.0; 4]; 4];
-            m[0][0] = rho / std::f64::consts::PI;
-            m
-        };
+        let brdf = lambert_brdf(rho);
         let out = Outputs {
             image: true,
             range: true,
@@ -1974,17 +1967,7 @@ mod sample_tests {
         .unwrap();
         let mesh = sphere_and_plate();
         for (beta, k) in [(0.0, 4usize), (0.0, 16), (0.35, 8)] {
-            let tables = GpuTables::pack(
-                &[vec![PartRef {
-                    scale: 1.0,
-                    n_z: 4,
-                    n_psi: 0,
-                    data: &data,
-                    cos_weighted: false,
-                }]],
-                beta,
-            )
-            .unwrap();
+            let tables = lambert_tables(rho, beta);
             let mut sensor = lambert_sensor(64);
             sensor.samples = k;
             sensor.bistatic_angle = beta;
@@ -2058,17 +2041,7 @@ mod sample_tests {
         let v = vec![[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]];
         let plate = Mesh::new(v, vec![[0, 1, 2], [0, 2, 3]], None, vec![0; 2], 1).unwrap();
         let analytic = 4.0 * rho * (2.0 * h) * (2.0 * h);
-        let tables = GpuTables::pack(
-            &[vec![PartRef {
-                scale: 1.0,
-                n_z: 4,
-                n_psi: 0,
-                data: &data,
-                cos_weighted: false,
-            }]],
-            0.0,
-        )
-        .unwrap();
+        let tables = lambert_tables(rho, 0.0);
         let rot = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
         let mut errs = vec![];
         for k in [1usize, 4, 16] {

@@ -104,6 +104,22 @@ use crate::error::{Error, Result};
 /// Largest image side (resolution x supersampling) accepted.
 pub const MAX_IMAGE_SIDE: usize = 8192;
 
+/// Validate a number of visibility samples per pixel ([`gpu::sample_offsets`]).
+pub fn check_samples(k: usize) -> Result<()> {
+    if k.is_power_of_two() && k <= gpu::MAX_SAMPLES {
+        Ok(())
+    } else {
+        Err(Error::param(
+            "pixel_samples",
+            k,
+            format!(
+                "visibility samples per pixel: 1, 2, 4, 8 or {}",
+                gpu::MAX_SAMPLES
+            ),
+        ))
+    }
+}
+
 /// Validate a sensor set-up (every parameter named with its allowed range).
 pub fn check_sensor(s: &gpu::SensorSetup) -> Result<()> {
     if s.intensity_only && s.polarization.is_none() {
@@ -127,16 +143,7 @@ pub fn check_sensor(s: &gpu::SensorSetup) -> Result<()> {
             format!("an integer >= 1 with resolution x supersampling <= {MAX_IMAGE_SIDE}"),
         ));
     }
-    if !(s.samples.is_power_of_two() && s.samples <= gpu::MAX_SAMPLES) {
-        return Err(Error::param(
-            "samples",
-            s.samples,
-            format!(
-                "visibility samples per pixel: 1, 2, 4, 8 or {}",
-                gpu::MAX_SAMPLES
-            ),
-        ));
-    }
+    check_samples(s.samples)?;
     if !(s.bistatic_angle >= 0.0 && s.bistatic_angle < 0.5 * std::f64::consts::PI) {
         return Err(Error::param(
             "bistatic_angle",
