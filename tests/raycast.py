@@ -14,10 +14,9 @@ def pixel_rays(ext: float, n: int, offsets: np.ndarray | None = None) -> tuple[n
     orthographic rays."""
     pix = 2 * ext / n
     uv = np.array([[0.5, 0.5]]) if offsets is None else np.asarray(offsets, float)
-    j = np.arange(n)[None, :, None]
-    i = np.arange(n)[:, None, None]
-    X = -ext + (j + uv[None, None, :, 0]) * pix + 0 * i
-    Y = ext - (i + uv[None, None, :, 1]) * pix + 0 * j
+    shape = (n, n, len(uv))  # (row, column, sample)
+    X = np.broadcast_to(-ext + (np.arange(n)[None, :, None] + uv[None, None, :, 0]) * pix, shape)
+    Y = np.broadcast_to(ext - (np.arange(n)[:, None, None] + uv[None, None, :, 1]) * pix, shape)
     origins = np.stack([X.ravel(), Y.ravel(), np.full(X.size, 2 * ext)], axis=1)
     return origins, np.tile([0.0, 0.0, -1.0], (X.size, 1))
 
