@@ -590,13 +590,19 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                 let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer * n_s + k), 0).x;
                 ids[k] = select(0u, id, id <= params.n_tri);
             }
+            // bit k of `done`: sample k is empty or in a group already shaded. One loop
+            // iteration per group, in the order of their first samples (not one per
+            // sample: lavapipe runs a branch masked for every invocation of a SIMD batch,
+            // and the loop's exit test is what skips work nobody needs).
             var done = 0u;
-            var c_big = 0u;
             for (var k = 0u; k < n_s; k++) {
+                done |= select(0u, 1u << k, ids[k] == 0u);
+            }
+            let all = (1u << n_s) - 1u;
+            var c_big = 0u;
+            while (done != all) {
+                let k = firstTrailingBit(~done);
                 let id = ids[k];
-                if (id == 0u || (done & (1u << k)) != 0u) {
-                    continue;
-                }
                 var c = 0u;
                 var su = 0.0;
                 var sv = 0.0;
