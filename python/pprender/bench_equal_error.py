@@ -133,7 +133,7 @@ def measure(repeats: int = 3, batch: int = 32, device: str = "auto") -> list[dic
         qb = np.repeat(q1, batch, axis=0)
         for label, quality, samples, ss in SETTINGS:
             sensor = pprender.Lidar(quality=quality, resolution=RES, supersampling=ss, polarization=[1, 0, 0, 0],
-                                    **({} if samples is None else {"pixel_samples": samples}))
+                                    pixel_samples=samples)
             r = pprender.render(scene, sensor, q1, outputs=("stokes",), device=device)
             assert r.stokes is not None
             err = rms_error(r.stokes[0, ..., 0].astype(np.float64), s0_ref)
