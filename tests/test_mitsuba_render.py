@@ -19,6 +19,7 @@ import pytest
 
 import pprender
 from pprender import models
+from pprender.bench_render import mitsuba_monostatic_scene
 
 RES = 64
 
@@ -32,21 +33,11 @@ def test_sphere_stokes_image_matches_mitsuba(mitsuba, tmp_path, alpha):
     path = str(tmp_path / "sphere.ply")
     mesh.export(path)
     ext = float(np.linalg.norm(mesh.vertices, axis=1).max())
-    scene = mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
-        "sensor": {
-            "type": "orthographic",
-            "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 4 * ext], target=[0, 0, 0], up=[0, 1, 0])
-            @ mi.ScalarTransform4f.scale([ext, ext, 1.0]),
-            "film": {"type": "hdrfilm", "width": RES, "height": RES, "rfilter": {"type": "box"}},
-            "sampler": {"type": "independent"},
-        },
-        "emitter": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
-        "shape": {"type": "ply", "filename": path, "face_normals": False,
-                  "bsdf": {"type": "roughconductor", "distribution": "beckmann", "alpha": alpha,
-                           "eta": eta.real, "k": eta.imag}},
-    })
+    # the same Mitsuba scene as the renderer benchmark (orthographic sensor, directional
+    # emitter along the view, stokes over path with max_depth 2; vertex normals)
+    scene = mitsuba_monostatic_scene(mi, path, ext, RES, {
+        "type": "roughconductor", "distribution": "beckmann", "alpha": alpha,
+        "eta": eta.real, "k": eta.imag}, smooth=True)
 
     def stokes(seed: int) -> np.ndarray:
         img = np.asarray(mi.render(scene, spp=256, seed=seed))

@@ -91,12 +91,9 @@ def rms_error(img: np.ndarray, ref: np.ndarray) -> float:
 
 
 def _best(f: Any, repeats: int) -> float:
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        f()
-        best = min(best, time.perf_counter() - t0)
-    return best
+    from .bench_render import best_time
+
+    return best_time(f, repeats)[0]
 
 
 def _mitsuba_scene(mesh: Any, ext: float, smooth: bool, d: str) -> Any:

@@ -110,12 +110,11 @@ def _sum_down(img: np.ndarray, f: int) -> np.ndarray:
 
 def _time(scene: pprender.Scene, sensor: pprender.Lidar, rots: np.ndarray, repeats: int,
           device: str) -> float:
+    from .bench_render import best_time
+
     pprender.render(scene, sensor, rots[:2], outputs=("profile", "mueller"), device=device)  # warm
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        pprender.render(scene, sensor, rots, outputs=("profile", "mueller"), device=device)
-        best = min(best, time.perf_counter() - t0)
+    best, _ = best_time(lambda: pprender.render(scene, sensor, rots, outputs=("profile", "mueller"), device=device),
+                        repeats)
     return best / len(rots)
 
 
