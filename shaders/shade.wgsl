@@ -62,6 +62,10 @@ override ELEMENT_MASK: u32 = 0xffffu;
 // Visibility samples per pixel K (SensorSetup::samples; a constant so that K = 1 compiles
 // to the single-sample kernel).
 override SAMPLES: u32 = 1u;
+// Analytic coverage (SensorSetup::analytic; SAMPLES = 1): the pixel's area is shared among
+// the triangles seen at the centres of its 3x3 neighbourhood by exact polygon clipping in
+// depth order (see cs_main and coverage_parts).
+override COVERAGE: bool = false;
 
 const PI: f32 = 3.14159265358979;
 const MAX_PARTS: u32 = 3u;
@@ -88,7 +92,7 @@ struct Params {
     beta: f32,         // bistatic angle (rad)
     max_extent: f32,   // cap on the sub-pixel range widths (m)
     tx_width: u32,     // side of the transmitter's id map (texels; SHADOWS only)
-    _pad0: u32,
+    closed: u32,       // 1: closed mesh, back faces culled (Mesh::closed)
     offsets: array<vec4<f32>, 16>, // the SAMPLES visibility samples' (u, v) in the pixel
                                    // (from its top-left corner; tri_ids layers l K .. l K + K - 1)
 }
@@ -365,6 +369,273 @@ fn in_shadow(tri: u32, rot: mat3x3<f32>, p: vec3<f32>, p0: vec3<f32>, p1: vec3<f
     return all_closer;
 }
 
+// ---- analytic coverage (COVERAGE; twin: render::twin::coverage_parts) ----
+// Pixel-local coordinates: (u, v) in pixels from the pixel's top-left corner, v down the
+// rows. Polygons are convex, counter-clockwise in (u, v) as the square (0,0) (1,0) (1,1)
+// (0,1) is listed (positive shoelace area), at most CLIP_VERTS vertices (a vertex beyond
+// is dropped: only pieces cut by more than six edges can need it).
+
+const CLIP_VERTS: u32 = 10u;
+const MAX_PIECES: u32 = 8u;     // convex pieces of a candidate's visible part
+const MAX_QUEUE: u32 = 64u;     // triangles examined per pixel
+const MAX_CAND: u32 = 32u;      // of those, overlapping the pixel
+const AREA_EPS: f32 = 1e-7;     // pieces and parts smaller than this (pixel^2) are dropped
+const OVERFLOW: u32 = 0xffffffffu;
+
+struct Poly {
+    v: array<vec2<f32>, 10>,
+    n: u32,
+}
+
+fn unit_square() -> Poly {
+    var p: Poly;
+    p.v[0] = vec2<f32>(0.0, 0.0);
+    p.v[1] = vec2<f32>(1.0, 0.0);
+    p.v[2] = vec2<f32>(1.0, 1.0);
+    p.v[3] = vec2<f32>(0.0, 1.0);
+    p.n = 4u;
+    return p;
+}
+
+// s cross(d, x - a): the side of x relative to the line through a along d (evaluated
+// relative to a, so vertices far from the pixel keep their precision).
+fn side(a: vec2<f32>, d: vec2<f32>, s: f32, x: vec2<f32>) -> f32 {
+    return s * (d.x * (x.y - a.y) - d.y * (x.x - a.x));
+}
+
+// The part of p where side(a, d, s, x) >= 0 (Sutherland-Hodgman, one edge).
+fn clip_edge(p: Poly, a: vec2<f32>, d: vec2<f32>, s: f32) -> Poly {
+    var out: Poly;
+    out.n = 0u;
+    if (p.n < 3u) {
+        return out;
+    }
+    var prev = p.v[p.n - 1u];
+    var fp = side(a, d, s, prev);
+    for (var k = 0u; k < p.n; k++) {
+        let cur = p.v[k];
+        let fc = side(a, d, s, cur);
+        // a strict crossing only: a vertex on the line is kept as it is, not doubled
+        if (((fc > 0.0 && fp < 0.0) || (fc < 0.0 && fp > 0.0)) && out.n < CLIP_VERTS) {
+            out.v[out.n] = prev + (fp / (fp - fc)) * (cur - prev);
+            out.n++;
+        }
+        if (fc >= 0.0 && out.n < CLIP_VERTS) {
+            out.v[out.n] = cur;
+            out.n++;
+        }
+        prev = cur;
+        fp = fc;
+    }
+    return out;
+}
+
+// (area, area-weighted u, area-weighted v) of p: the shoelace sums.
+fn moments(p: Poly) -> vec3<f32> {
+    var m = vec3<f32>(0.0);
+    if (p.n < 3u) {
+        return m;
+    }
+    for (var k = 0u; k < p.n; k++) {
+        let a = p.v[k];
+        let b = p.v[select(k + 1u, 0u, k + 1u == p.n)];
+        let c = a.x * b.y - b.x * a.y;
+        m += vec3<f32>(c, (a.x + b.x) * c, (a.y + b.y) * c);
+    }
+    return m * vec3<f32>(0.5, 1.0 / 6.0, 1.0 / 6.0);
+}
+
+// Whether convex polygon p lies on the outer side (or on the line, within 1e-5 pixel) of
+// one of the edges of the triangle with vertices t and orientation s.
+fn separated(p: Poly, t: array<vec2<f32>, 3>, s: f32) -> bool {
+    for (var k = 0u; k < 3u; k++) {
+        let a = t[k];
+        let d = t[select(k + 1u, 0u, k == 2u)] - a;
+        let tol = 1e-5 * length(d);
+        var out = true;
+        for (var m = 0u; m < p.n; m++) {
+            out = out && side(a, d, s, p.v[m]) <= tol;
+        }
+        if (out) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// Depth (telescope z) at the point c (pixel coordinates) of the plane through the triangle
+// with vertices t (pixel coordinates) and depths z.
+fn plane_depth(t: array<vec2<f32>, 3>, z: vec3<f32>, c: vec2<f32>) -> f32 {
+    let e1 = t[1] - t[0];
+    let e2 = t[2] - t[0];
+    let d = c - t[0];
+    let den = e1.x * e2.y - e1.y * e2.x;
+    let l1 = (d.x * e2.y - d.y * e2.x) / den;
+    let l2 = (e1.x * d.y - e1.y * d.x) / den;
+    return z.x + l1 * (z.y - z.x) + l2 * (z.z - z.x);
+}
+
+// One part of a pixel: a triangle, the fraction of the pixel's area it covers, the point
+// (u, v) of the pixel where it is shaded and the extent (u, v) of the pixel it spans.
+struct Part {
+    tri: u32,
+    frac: f32,
+    centre: vec2<f32>,
+    span: vec2<f32>,
+}
+
+// The parts of pixel (col, row) of attitude `layer` under analytic coverage, from the
+// `n_seed` distinct triangles seen at its 3x3 neighbourhood's centres (scan order).
+// Candidates: the seeds and, breadth first, the edge neighbours (mesh adjacency, after the
+// normals in `geometry`) of every seed and of every candidate that overlaps the pixel, at
+// most MAX_QUEUE examined (so the triangles of a surface that hold no centre are found
+// through the ones that do); back faces are skipped on closed meshes (the raster culls
+// them). Each candidate overlapping the pixel (at most MAX_CAND) is clipped to it; its
+// visible part is that clip minus every other candidate that overlaps it and is nearer
+// at the centroid of their overlap (ties: the lower id is nearer), kept as at most
+// MAX_PIECES convex pieces. Exact for triangles that do not intersect. Returns the
+// number of parts written to `parts` (in candidate order), or OVERFLOW when more than
+// MAX_QUEUE triangles were to be examined or more than MAX_CAND overlap the pixel (a
+// vertex shared by dozens of triangles, a fan's apex); the caller then falls back to the
+// pixel-centre sample.
+fn coverage_parts(col: u32, row: u32, layer: u32, seeds: array<u32, 9>, n_seed: u32,
+                  parts: ptr<function, array<Part, 32>>) -> u32 {
+    let rot = rotations[layer];
+    let x0 = -params.ext + f32(col) * params.pix;
+    let y0 = params.ext - f32(row) * params.pix;
+    let inv = 1.0 / params.pix;
+    let adj_base = 3u * params.n_tri * (1u + params.has_normals);
+    var queue: array<u32, 64>;
+    for (var i = 0u; i < n_seed; i++) {
+        queue[i] = seeds[i];
+    }
+    var n_q = n_seed;
+    var q: array<array<vec2<f32>, 3>, 32>;
+    var sg: array<f32, 32>;
+    var zs: array<vec3<f32>, 32>;
+    var tri: array<u32, 32>;
+    var n_c = 0u;
+    for (var qi = 0u; qi < n_q; qi++) {
+        let t = queue[qi];
+        var uv: array<vec2<f32>, 3>;
+        var z: array<f32, 3>;
+        for (var k = 0u; k < 3u; k++) {
+            let p = rot * geometry[3u * t + k].xyz;
+            uv[k] = vec2<f32>((p.x - x0) * inv, (y0 - p.y) * inv);
+            z[k] = p.z;
+        }
+        let e1 = uv[1] - uv[0];
+        let e2 = uv[2] - uv[0];
+        let den = e1.x * e2.y - e1.y * e2.x;
+        // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
+        var overlaps = den != 0.0 && !(params.closed != 0u && den > 0.0);
+        var m = vec3<f32>(0.0);
+        if (overlaps) {
+            var clip = unit_square();
+            for (var k = 0u; k < 3u; k++) {
+                clip = clip_edge(clip, uv[k], uv[select(k + 1u, 0u, k == 2u)] - uv[k], sign(den));
+            }
+            m = moments(clip);
+            overlaps = m.x > AREA_EPS;
+        }
+        if (overlaps && n_c == MAX_CAND) {
+            return OVERFLOW;
+        }
+        if (overlaps) {
+            q[n_c] = uv;
+            zs[n_c] = vec3<f32>(z[0], z[1], z[2]);
+            sg[n_c] = sign(den);
+            tri[n_c] = t;
+            n_c++;
+        }
+        if (overlaps || qi < n_seed) {
+            let nb = bitcast<vec4<u32>>(geometry[adj_base + t]);
+            for (var k = 0u; k < 3u; k++) {
+                let u = nb[k];
+                if (u >= params.n_tri) {
+                    continue;
+                }
+                var j = 0u;
+                while (j < n_q && queue[j] != u) {
+                    j++;
+                }
+                if (j == n_q) {
+                    if (n_q == MAX_QUEUE) {
+                        return OVERFLOW;
+                    }
+                    queue[n_q] = u;
+                    n_q++;
+                }
+            }
+        }
+    }
+    // each candidate's visible part: its clip minus every candidate that overlaps it and
+    // is nearer there (depths compared at the centroid of the overlap; candidates that one
+    // of the other's edges separates, as neighbours on one surface, are skipped at once)
+    var n_parts = 0u;
+    for (var i = 0u; i < n_c; i++) {
+        var base = unit_square();
+        for (var k = 0u; k < 3u; k++) {
+            base = clip_edge(base, q[i][k], q[i][select(k + 1u, 0u, k == 2u)] - q[i][k], sg[i]);
+        }
+        var pieces: array<Poly, 8>;
+        pieces[0] = base;
+        var n_p = 1u;
+        for (var j = 0u; j < n_c && n_p > 0u; j++) {
+            if (j == i || separated(base, q[j], sg[j])) {
+                continue;
+            }
+            var ov = base;
+            for (var k = 0u; k < 3u; k++) {
+                ov = clip_edge(ov, q[j][k], q[j][select(k + 1u, 0u, k == 2u)] - q[j][k], sg[j]);
+            }
+            let mo = moments(ov);
+            if (mo.x <= AREA_EPS) {
+                continue;
+            }
+            let c = mo.yz / mo.x;
+            let zi = plane_depth(q[i], zs[i], c);
+            let zj = plane_depth(q[j], zs[j], c);
+            if (zj < zi || (zj == zi && tri[j] > tri[i])) {
+                continue;
+            }
+            var next: array<Poly, 8>;
+            var n_next = 0u;
+            for (var pi = 0u; pi < n_p; pi++) {
+                var cur = pieces[pi];
+                for (var k = 0u; k < 3u && cur.n >= 3u; k++) {
+                    let a = q[j][k];
+                    let d = q[j][select(k + 1u, 0u, k == 2u)] - a;
+                    let outside = clip_edge(cur, a, d, -sg[j]);
+                    if (n_next < MAX_PIECES && moments(outside).x > AREA_EPS) {
+                        next[n_next] = outside;
+                        n_next++;
+                    }
+                    cur = clip_edge(cur, a, d, sg[j]);
+                }
+            }
+            pieces = next;
+            n_p = n_next;
+        }
+        var vis = vec3<f32>(0.0);
+        var lo = vec2<f32>(1.0);
+        var hi = vec2<f32>(0.0);
+        for (var pi = 0u; pi < n_p; pi++) {
+            vis += moments(pieces[pi]);
+            for (var k = 0u; k < pieces[pi].n; k++) {
+                lo = min(lo, pieces[pi].v[k]);
+                hi = max(hi, pieces[pi].v[k]);
+            }
+        }
+        if (vis.x > AREA_EPS) {
+            (*parts)[n_parts] = Part(tri[i], vis.x, vis.yz / vis.x,
+                                     clamp(hi - lo, vec2<f32>(0.0), vec2<f32>(1.0)));
+            n_parts++;
+        }
+    }
+    return n_parts;
+}
+
 // Shade the point (px, py) (telescope frame, m) of triangle `tri` in attitude `layer`: writes
 // the differential cross-section of a whole pixel there (Mueller, or Stokes/intensity for
 // CHANNELS < 16; zero where unlit or shadowed) to `out` and returns (r0, a, b, hit): the
@@ -538,6 +809,45 @@ fn add_profile(layer: u32, r0: f32, wa: f32, wb: f32, v: ptr<function, array<f32
     }
 }
 
+// What a pixel's parts add up to: covered fraction, covered fraction x range, and the
+// footprint widths of its largest part (`frac_big` its fraction).
+struct PixelAcc {
+    cov: f32,
+    r_sum: f32,
+    w_big: vec2<f32>,
+    frac_big: f32,
+}
+
+// Shade one part of pixel (col, row) (a triangle, the fraction of the pixel it covers, the
+// point in the pixel where it is shaded and the extent of the pixel it spans), add it to
+// the pixel's values `out` and to the profile, and to `acc`. Twin: the loop over parts in
+// render::twin::render_cpu.
+fn shade_part(layer: u32, col: u32, row: u32, part: Part, cap: f32,
+              out: ptr<function, array<f32, 16>>, acc: ptr<function, PixelAcc>) {
+    let x = -params.ext + (f32(col) + part.centre.x) * params.pix;
+    let y = params.ext - (f32(row) + part.centre.y) * params.pix;
+    var g: array<f32, 16>;
+    let h = shade_at(part.tri, layer, x, y, &g);
+    if (h.w == 0.0) {
+        return;
+    }
+    let wab = part.span * h.yz;
+    (*acc).cov += part.frac;
+    (*acc).r_sum += part.frac * h.x;
+    if (part.frac > (*acc).frac_big) {
+        (*acc).frac_big = part.frac;
+        (*acc).w_big = wab;
+    }
+    for (var ch = 0u; ch < CHANNELS; ch++) {
+        g[ch] *= part.frac;
+        (*out)[ch] += g[ch];
+        g[ch] = clamp(g[ch], -cap, cap);
+    }
+    if (WRITE_PROFILE && g[0] != 0.0) {
+        add_profile(layer, h.x, wab.x, wab.y, &g);
+    }
+}
+
 // One invocation per pixel. The pixel's K visibility samples (src/render/gpu.rs,
 // sample_offsets) are grouped by the triangle they see; each triangle seen by c of them is
 // shaded once, at the mean of its samples' points (inside it: the triangle is convex), and
@@ -547,7 +857,9 @@ fn add_profile(layer: u32, r0: f32, wa: f32, wb: f32, v: ptr<function, array<f32
 // whole area: exactly the single-sample result. The range output is the covered samples'
 // mean range, with the covered fraction of the samples; in footprint mode the widths are
 // those of the triangle seen by the most samples (an approximation where a pixel spans
-// surfaces at different ranges). Twin: render::twin::render_cpu.
+// surfaces at different ranges). With COVERAGE (analytic coverage, SAMPLES = 1) the parts
+// come from coverage_parts instead: exact visible areas, each shaded at its centroid.
+// Twin: render::twin::render_cpu.
 @compute @workgroup_size(8, 8, 1)
 fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
            @builtin(local_invocation_index) lidx: u32) {
@@ -561,10 +873,57 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
     let cap = 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
     if (inside) {
         let n_s = SAMPLES;
-        var n_cov = 0u;
-        var r_sum = 0.0;
-        var w_big = vec2<f32>(0.0);
-        if (SAMPLES == 1u) {
+        // (covered fraction, covered fraction x range, footprint widths of the largest part)
+        var acc = PixelAcc(0.0, 0.0, vec2<f32>(0.0), 0.0);
+        if (COVERAGE) {
+            // candidates: the distinct triangles seen at the 3x3 neighbourhood's centres
+            var cand: array<u32, 9>;
+            var n_cand = 0u;
+            var n_hit = 0u;
+            for (var dr = -1; dr <= 1; dr++) {
+                for (var dc = -1; dc <= 1; dc++) {
+                    let r = i32(row) + dr;
+                    let c = i32(col) + dc;
+                    var id = 0u;
+                    if (r >= 0 && r < i32(params.height) && c >= 0 && c < i32(params.width)) {
+                        id = textureLoad(tri_ids, vec2<i32>(c, r), i32(layer), 0).x;
+                    }
+                    if (id == 0u || id > params.n_tri) {
+                        continue;
+                    }
+                    n_hit++;
+                    var k = 0u;
+                    while (k < n_cand && cand[k] != id - 1u) {
+                        k++;
+                    }
+                    if (k == n_cand) {
+                        cand[k] = id - 1u;
+                        n_cand++;
+                    }
+                }
+            }
+            var parts: array<Part, 32>;
+            var n_parts = 0u;
+            if (n_cand == 1u && n_hit == 9u) {
+                // one triangle at all nine centres contains their hull, so the whole pixel
+                parts[0] = Part(cand[0], 1.0, vec2<f32>(0.5), vec2<f32>(1.0));
+                n_parts = 1u;
+            } else if (n_cand > 0u) {
+                n_parts = coverage_parts(col, row, layer, cand, n_cand, &parts);
+                if (n_parts == OVERFLOW) {
+                    // too many triangles: the centre sample, as with one sample per pixel
+                    let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
+                    n_parts = 0u;
+                    if (id > 0u && id <= params.n_tri) {
+                        parts[0] = Part(id - 1u, 1.0, vec2<f32>(0.5), vec2<f32>(1.0));
+                        n_parts = 1u;
+                    }
+                }
+            }
+            for (var k = 0u; k < n_parts; k++) {
+                shade_part(layer, col, row, parts[k], cap, &out, &acc);
+            }
+        } else if (SAMPLES == 1u) {
             // the pixel centre alone
             let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
             if (id > 0u && id <= params.n_tri) {
@@ -572,9 +931,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                 let y = params.ext - (f32(row) + 0.5) * params.pix;
                 let h = shade_at(id - 1u, layer, x, y, &out);
                 if (h.w != 0.0) {
-                    n_cov = 1u;
-                    r_sum = h.x;
-                    w_big = h.yz;
+                    acc = PixelAcc(1.0, h.x, h.yz, 1.0);
                     var g: array<f32, 16>;
                     for (var ch = 0u; ch < CHANNELS; ch++) {
                         g[ch] = clamp(out[ch], -cap, cap);
@@ -599,7 +956,6 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                 done |= select(0u, 1u << k, ids[k] == 0u);
             }
             let all = (1u << n_s) - 1u;
-            var c_big = 0u;
             while (done != all) {
                 let k = firstTrailingBit(~done);
                 let id = ids[k];
@@ -619,31 +975,10 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
                         hi = max(hi, o);
                     }
                 }
-                let x = -params.ext + (f32(col) + su / f32(c)) * params.pix;
-                let y = params.ext - (f32(row) + sv / f32(c)) * params.pix;
-                var g: array<f32, 16>;
-                let h = shade_at(id - 1u, layer, x, y, &g);
-                if (h.w == 0.0) {
-                    continue;
-                }
-                let frac = f32(c) / f32(n_s);
                 // the footprint of the part of the pixel its samples span (a whole pixel: 1)
-                let span = hi - lo + vec2<f32>(1.0 / f32(n_s));
-                let wab = span * h.yz;
-                n_cov += c;
-                r_sum += f32(c) * h.x;
-                if (c > c_big) {
-                    c_big = c;
-                    w_big = wab;
-                }
-                for (var ch = 0u; ch < CHANNELS; ch++) {
-                    g[ch] *= frac;
-                    out[ch] += g[ch];
-                    g[ch] = clamp(g[ch], -cap, cap);
-                }
-                if (WRITE_PROFILE && g[0] != 0.0) {
-                    add_profile(layer, h.x, wab.x, wab.y, &g);
-                }
+                let part = Part(id - 1u, f32(c) / f32(n_s), vec2<f32>(su, sv) / f32(c),
+                                hi - lo + vec2<f32>(1.0 / f32(n_s)));
+                shade_part(layer, col, row, part, cap, &out, &acc);
             }
         }
         let pix_index = (layer * params.height + row) * params.width + col;
@@ -653,12 +988,12 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
             }
         }
         if (WRITE_RANGE) {
-            let r_out = select(bitcast<f32>(0x7fc00000u), r_sum / f32(max(n_cov, 1u)), n_cov > 0u);
-            let cov = f32(n_cov) / f32(n_s);
+            let r_out = select(bitcast<f32>(0x7fc00000u), acc.r_sum / acc.cov, acc.cov > 0.0);
+            let cov = acc.cov;
             if (WRITE_FOOTPRINT) {
                 range_img[4u * pix_index] = r_out;
-                range_img[4u * pix_index + 1u] = w_big.x;
-                range_img[4u * pix_index + 2u] = w_big.y;
+                range_img[4u * pix_index + 1u] = acc.w_big.x;
+                range_img[4u * pix_index + 2u] = acc.w_big.y;
                 range_img[4u * pix_index + 3u] = cov;
             } else {
                 range_img[2u * pix_index] = r_out;

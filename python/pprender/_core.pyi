@@ -288,6 +288,7 @@ class RenderScene:
         device: str,
         pulse_samples: Sequence[float] | None = None,
         pulse_spacing: float = 0.0,
+        analytic: bool = False,
         n_z: int | None = None,
         n_psi: int | None = None,
         n_z_lambertian: int | None = None,

@@ -201,6 +201,14 @@ class Lidar:
     cost one shading as with ``1``. This is what makes silhouettes, panel edges and thin
     parts area-correct (docs/render-accuracy.md); ``supersampling`` refines everything at
     ``supersampling^2`` times the cost.
+    ``coverage``: ``"sampled"`` (default: the ``pixel_samples`` above) or ``"analytic"``:
+    one raster sample per pixel finds the triangles around it (those seen at the centres of
+    the pixel's 3x3 neighbourhood, and their edge neighbours on the mesh), and each one's
+    visible part of the pixel is computed exactly by clipping the triangles to the pixel in
+    depth order; each is shaded once at the centroid of its part. Edges then cost no more
+    samples: coverage is exact to f32 rounding wherever at most 32 triangles overlap a pixel
+    (else, at a vertex shared by dozens of triangles, the pixel falls back to its centre
+    sample). Needs ``pixel_samples`` 1 (or unset).
     ``quality``: the speed/accuracy dial (:data:`QUALITY`; docs/tradeoff.md measures each):
     ``"fast"`` (coarse BRDF tables, pixels half the range FWHM across), ``"balanced"``
     (the default grids and resolution), ``"accurate"`` (fine tables, double bounce at
@@ -227,6 +235,7 @@ class Lidar:
     polarization: Sequence[float] | None = None
     supersampling: int = 1
     pixel_samples: int | None = None
+    coverage: str = "sampled"
     pulse_samples: Sequence[float] | None = None
     pulse_sample_spacing: float | None = None
     quality: str = "balanced"
@@ -272,6 +281,11 @@ class Lidar:
             not isinstance(k, (int, np.integer)) or isinstance(k, bool) or k not in (1, 2, 4, 8, 16)
         ):
             raise Error(f"invalid pixel_samples = {k!r}: visibility samples per pixel, one of 1, 2, 4, 8, 16")
+        if self.coverage not in ("sampled", "analytic"):
+            raise Error(f"invalid coverage = {self.coverage!r}: \"sampled\" or \"analytic\"")
+        if self.coverage == "analytic" and k is not None and k != 1:
+            raise Error(f"invalid pixel_samples = {k!r} with coverage=\"analytic\": 1 (or None); "
+                        "analytic coverage samples each pixel once to find its triangles")
         b = self.bistatic_angle
         if not (isinstance(b, (int, float)) and 0.0 <= b < math.pi / 2):
             raise Error(f"invalid bistatic_angle = {b!r}: radians in [0, pi/2)")
@@ -357,7 +371,10 @@ class Lidar:
         return int(min(1024, max(q["min_resolution"], n)))
 
     def effective_pixel_samples(self) -> int:
-        """Visibility samples per pixel: ``pixel_samples``, or the quality preset's."""
+        """Visibility samples per pixel: ``pixel_samples``, or the quality preset's (1 with
+        analytic ``coverage``)."""
+        if self.coverage == "analytic":
+            return 1
         if self.pixel_samples is not None:
             return int(self.pixel_samples)
         return int(QUALITY[self.quality]["pixel_samples"])
@@ -524,6 +541,7 @@ def render(
         device="reference" if reference else device,
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
+        analytic=sensor.coverage == "analytic",
         **topts,
     )
     n = len(rot)

@@ -175,7 +175,7 @@ impl PyRenderScene {
     #[pyo3(signature = (rotations, *, resolution, supersampling, samples, bistatic_angle, polarization,
         intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
-        pulse_spacing=0.0, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
+        pulse_spacing=0.0, analytic=false, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
         n_z_double=None, n_psi_double=None, double_order=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
@@ -196,6 +196,7 @@ impl PyRenderScene {
         device: &str,
         pulse_samples: Option<Vec<f64>>,
         pulse_spacing: f64,
+        analytic: bool,
         n_z: Option<usize>,
         n_psi: Option<usize>,
         n_z_lambertian: Option<usize>,
@@ -242,6 +243,7 @@ impl PyRenderScene {
             resolution,
             supersampling,
             samples,
+            analytic,
             bistatic_angle,
             polarization,
             intensity_only,

@@ -17,6 +17,8 @@ pub struct Mesh {
     /// outward normals ([`is_closed_outward`]): the nearest surface along any outside ray
     /// is then a front face, and the raster passes cull back faces.
     pub closed: bool,
+    /// [`Mesh::adjacency`], computed on first use.
+    adjacency: std::sync::OnceLock<Vec<[u32; 3]>>,
 }
 
 /// Whether a triangle mesh is a union of closed, outward-wound surfaces: every directed
@@ -175,6 +177,38 @@ impl Mesh {
             face_material,
             radius,
             closed,
+            adjacency: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// For each face, the face across each of its edges (edge `k` joins corners `k` and
+    /// `k + 1`), `u32::MAX` across a boundary edge. Edges are matched by their end points'
+    /// positions, not indices, so unwelded meshes (split vertices for flat shading) are
+    /// joined too; where more than two faces share an edge, each has the next of them.
+    pub fn adjacency(&self) -> &[[u32; 3]] {
+        self.adjacency.get_or_init(|| {
+            use std::collections::HashMap;
+            let key = |k: u32| self.vertices[k as usize].map(f64::to_bits);
+            // (end point, end point) as position bits -> (face, edge) sharing it
+            type EdgeKey = ([u64; 3], [u64; 3]);
+            let mut edges: HashMap<EdgeKey, Vec<(u32, u8)>> = HashMap::new();
+            for (t, f) in self.faces.iter().enumerate() {
+                for e in 0..3 {
+                    let (a, b) = (key(f[e]), key(f[(e + 1) % 3]));
+                    let k = if a <= b { (a, b) } else { (b, a) };
+                    edges.entry(k).or_default().push((t as u32, e as u8));
+                }
+            }
+            let mut adj = vec![[u32::MAX; 3]; self.faces.len()];
+            for list in edges.values() {
+                if list.len() < 2 {
+                    continue;
+                }
+                for (i, &(t, e)) in list.iter().enumerate() {
+                    adj[t as usize][e as usize] = list[(i + 1) % list.len()].0;
+                }
+            }
+            adj
         })
     }
 

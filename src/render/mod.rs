@@ -144,6 +144,14 @@ pub fn check_sensor(s: &gpu::SensorSetup) -> Result<()> {
         ));
     }
     check_samples(s.samples)?;
+    if s.analytic && s.samples != 1 {
+        return Err(Error::param(
+            "pixel_samples",
+            s.samples,
+            "1 with analytic coverage (coverage=\"analytic\" finds the pixel's triangles \
+             at the pixel centres)",
+        ));
+    }
     if !(s.bistatic_angle >= 0.0 && s.bistatic_angle < 0.5 * std::f64::consts::PI) {
         return Err(Error::param(
             "bistatic_angle",
