@@ -430,6 +430,15 @@ fn clip_edge(p: Poly, a: vec2<f32>, d: vec2<f32>, s: f32) -> Poly {
     return out;
 }
 
+// The part of p inside the triangle with vertices t and orientation s.
+fn clip_triangle(p: Poly, t: array<vec2<f32>, 3>, s: f32) -> Poly {
+    var out = p;
+    for (var k = 0u; k < 3u; k++) {
+        out = clip_edge(out, t[k], t[select(k + 1u, 0u, k == 2u)] - t[k], s);
+    }
+    return out;
+}
+
 // (area, area-weighted u, area-weighted v) of p: the shoelace sums.
 fn moments(p: Poly) -> vec3<f32> {
     var m = vec3<f32>(0.0);
@@ -529,14 +538,8 @@ fn coverage_parts(col: u32, row: u32, layer: u32, seeds: array<u32, 9>, n_seed: 
         let den = e1.x * e2.y - e1.y * e2.x;
         // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
         var overlaps = den != 0.0 && !(params.closed != 0u && den > 0.0);
-        var m = vec3<f32>(0.0);
         if (overlaps) {
-            var clip = unit_square();
-            for (var k = 0u; k < 3u; k++) {
-                clip = clip_edge(clip, uv[k], uv[select(k + 1u, 0u, k == 2u)] - uv[k], sign(den));
-            }
-            m = moments(clip);
-            overlaps = m.x > AREA_EPS;
+            overlaps = moments(clip_triangle(unit_square(), uv, sign(den))).x > AREA_EPS;
         }
         if (overlaps && n_c == MAX_CAND) {
             return OVERFLOW;
@@ -574,10 +577,7 @@ fn coverage_parts(col: u32, row: u32, layer: u32, seeds: array<u32, 9>, n_seed: 
     // of the other's edges separates, as neighbours on one surface, are skipped at once)
     var n_parts = 0u;
     for (var i = 0u; i < n_c; i++) {
-        var base = unit_square();
-        for (var k = 0u; k < 3u; k++) {
-            base = clip_edge(base, q[i][k], q[i][select(k + 1u, 0u, k == 2u)] - q[i][k], sg[i]);
-        }
+        let base = clip_triangle(unit_square(), q[i], sg[i]);
         var pieces: array<Poly, 8>;
         pieces[0] = base;
         var n_p = 1u;
@@ -585,11 +585,7 @@ fn coverage_parts(col: u32, row: u32, layer: u32, seeds: array<u32, 9>, n_seed: 
             if (j == i || separated(base, q[j], sg[j])) {
                 continue;
             }
-            var ov = base;
-            for (var k = 0u; k < 3u; k++) {
-                ov = clip_edge(ov, q[j][k], q[j][select(k + 1u, 0u, k == 2u)] - q[j][k], sg[j]);
-            }
-            let mo = moments(ov);
+            let mo = moments(clip_triangle(base, q[j], sg[j]));
             if (mo.x <= AREA_EPS) {
                 continue;
             }

@@ -1606,6 +1606,15 @@ pub(crate) mod tests {
         }
     }
 
+    /// The identity and a generic attitude (no face edge-on, no edge along the grid).
+    pub fn two_attitudes() -> Vec<Rot> {
+        crate::render::geometry::rotations_from_quaternions(&[
+            [1.0, 0.0, 0.0, 0.0],
+            [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt()),
+        ])
+        .unwrap()
+    }
+
     #[test]
     fn lambertian_sphere_on_the_device_matches_twin_and_analytic() {
         let gpu = match context(DeviceChoice::Auto) {
@@ -1935,7 +1944,7 @@ mod shadow_tests {
 #[cfg(test)]
 mod sample_tests {
     use super::shadow_tests::sphere_and_plate;
-    use super::tests::{lambert_brdf, lambert_sensor, lambert_tables};
+    use super::tests::{lambert_brdf, lambert_sensor, lambert_tables, two_attitudes};
     use super::*;
     use crate::render::twin;
 
@@ -1980,11 +1989,7 @@ mod sample_tests {
             range: true,
             profile: true,
         };
-        let rots = crate::render::geometry::rotations_from_quaternions(&[
-            [1.0, 0.0, 0.0, 0.0],
-            [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt()),
-        ])
-        .unwrap();
+        let rots = two_attitudes();
         let mesh = sphere_and_plate();
         for (beta, k) in [(0.0, 4usize), (0.0, 16), (0.35, 8)] {
             let tables = lambert_tables(rho, beta);
@@ -2087,7 +2092,7 @@ mod sample_tests {
 #[cfg(test)]
 mod coverage_tests {
     use super::shadow_tests::sphere_and_plate;
-    use super::tests::{lambert_brdf, lambert_sensor, lambert_tables, uv_sphere};
+    use super::tests::{lambert_brdf, lambert_sensor, lambert_tables, two_attitudes, uv_sphere};
     use super::*;
     use crate::render::twin;
 
@@ -2104,11 +2109,7 @@ mod coverage_tests {
             range: true,
             profile: true,
         };
-        let rots = crate::render::geometry::rotations_from_quaternions(&[
-            [1.0, 0.0, 0.0, 0.0],
-            [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt()),
-        ])
-        .unwrap();
+        let rots = two_attitudes();
         let mesh = sphere_and_plate();
         for beta in [0.0, 0.35] {
             let tables = lambert_tables(rho, beta);
@@ -2151,20 +2152,7 @@ mod coverage_tests {
             for p in 0..lay.width * lay.width {
                 let (row, col) = (p / lay.width, p % lay.width);
                 let w = lay.width;
-                let seeds: Vec<usize> = (0..9)
-                    .filter_map(|k| {
-                        let (r, c) = (row as isize + k / 3 - 1, col as isize + k % 3 - 1);
-                        (r >= 0 && c >= 0 && (r as usize) < w && (c as usize) < w)
-                            .then(|| ids[r as usize * w + c as usize])
-                            .filter(|&id| id > 0)
-                            .map(|id| id as usize - 1)
-                    })
-                    .fold(vec![], |mut v, t| {
-                        if !v.contains(&t) {
-                            v.push(t);
-                        }
-                        v
-                    });
+                let (seeds, _) = twin::analytic_seeds(&ids, w, row, col);
                 if !seeds.is_empty()
                     && twin::coverage_parts(&mesh, &rots[0], &lay, row, col, &seeds).is_none()
                 {
@@ -2246,11 +2234,7 @@ mod coverage_tests {
             1,
         )
         .unwrap();
-        let rots = crate::render::geometry::rotations_from_quaternions(&[
-            [1.0, 0.0, 0.0, 0.0],
-            [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt()),
-        ])
-        .unwrap();
+        let rots = two_attitudes();
         for (a, rot) in rots.iter().enumerate() {
             let mut exact = 0.0;
             for f in &flat.faces {

@@ -402,6 +402,16 @@ fn plane_depth(t: &[[f64; 2]; 3], z: [f64; 3], c: [f64; 2]) -> f64 {
     z[0] + l1 * (z[1] - z[0]) + l2 * (z[2] - z[0])
 }
 
+/// The part of convex `p` inside triangle `t` (orientation `s`).
+fn clip_triangle(p: &Poly, t: &[[f64; 2]; 3], s: f64) -> Poly {
+    let mut out = p.clone();
+    for k in 0..3 {
+        let (a, b) = (t[k], t[(k + 1) % 3]);
+        out = clip_edge(&out, a, [b[0] - a[0], b[1] - a[1]], s);
+    }
+    out
+}
+
 /// (area, area-weighted u, area-weighted v) of a polygon.
 fn moments(p: &Poly) -> [f64; 3] {
     if p.len() < 3 {
@@ -452,12 +462,7 @@ pub fn coverage_parts(
         // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
         let mut overlaps = den != 0.0 && !(mesh.closed && den > 0.0);
         if overlaps {
-            let mut clip = unit_square();
-            for k in 0..3 {
-                let (a, b) = (uv[k], uv[(k + 1) % 3]);
-                clip = clip_edge(&clip, a, [b[0] - a[0], b[1] - a[1]], den.signum());
-            }
-            overlaps = moments(&clip)[0] > AREA_EPS;
+            overlaps = moments(&clip_triangle(&unit_square(), &uv, den.signum()))[0] > AREA_EPS;
         }
         if overlaps && tris.len() == MAX_CAND {
             return None;
@@ -483,11 +488,7 @@ pub fn coverage_parts(
     // separates them
     let mut parts = Vec::new();
     for &(t, uv, s, zt) in &tris {
-        let mut base = unit_square();
-        for k in 0..3 {
-            let (a, b) = (uv[k], uv[(k + 1) % 3]);
-            base = clip_edge(&base, a, [b[0] - a[0], b[1] - a[1]], s);
-        }
+        let base = clip_triangle(&unit_square(), &uv, s);
         let mut pieces = vec![base.clone()];
         for &(tj, uj, sj, zj) in &tris {
             if pieces.is_empty() {
@@ -496,12 +497,7 @@ pub fn coverage_parts(
             if tj == t || separated(&base, &uj, sj) {
                 continue;
             }
-            let mut ov = base.clone();
-            for k in 0..3 {
-                let (a, b) = (uj[k], uj[(k + 1) % 3]);
-                ov = clip_edge(&ov, a, [b[0] - a[0], b[1] - a[1]], sj);
-            }
-            let mo = moments(&ov);
+            let mo = moments(&clip_triangle(&base, &uj, sj));
             if mo[0] <= AREA_EPS {
                 continue;
             }
@@ -551,19 +547,11 @@ pub fn coverage_parts(
     Some(parts)
 }
 
-/// A pixel's parts under analytic coverage from the centre id map `ids` (`width x width`):
-/// the seeds are the distinct triangles seen at the centres of its 3x3 neighbourhood (scan
-/// order); one triangle at all nine contains their hull and so is the whole pixel, shaded
-/// at its centre; else [`coverage_parts`], or the centre sample alone where that overflows.
-pub fn analytic_parts(
-    mesh: &Mesh,
-    rot: &Rot,
-    lay: &Layout,
-    ids: &[u32],
-    row: usize,
-    col: usize,
-) -> Vec<Part> {
-    let w = lay.width as isize;
+/// The seeds of analytic coverage for pixel `(row, col)` of the centre id map `ids`
+/// (`width x width`): the distinct triangles seen at the centres of its 3x3 neighbourhood,
+/// in scan order, and how many of the nine centres see a surface.
+pub fn analytic_seeds(ids: &[u32], width: usize, row: usize, col: usize) -> (Vec<usize>, usize) {
+    let w = width as isize;
     let (mut cand, mut n_hit) = (Vec::new(), 0);
     for dr in -1isize..=1 {
         for dc in -1isize..=1 {
@@ -581,6 +569,22 @@ pub fn analytic_parts(
             }
         }
     }
+    (cand, n_hit)
+}
+
+/// A pixel's parts under analytic coverage from the centre id map `ids` (`width x width`):
+/// the seeds are the distinct triangles seen at the centres of its 3x3 neighbourhood (scan
+/// order); one triangle at all nine contains their hull and so is the whole pixel, shaded
+/// at its centre; else [`coverage_parts`], or the centre sample alone where that overflows.
+pub fn analytic_parts(
+    mesh: &Mesh,
+    rot: &Rot,
+    lay: &Layout,
+    ids: &[u32],
+    row: usize,
+    col: usize,
+) -> Vec<Part> {
+    let (cand, n_hit) = analytic_seeds(ids, lay.width, row, col);
     if cand.len() == 1 && n_hit == 9 {
         return vec![Part {
             tri: cand[0],
