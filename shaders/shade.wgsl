@@ -844,18 +844,170 @@ fn shade_part(layer: u32, col: u32, row: u32, part: Part, cap: f32,
     }
 }
 
-// One invocation per pixel. The pixel's K visibility samples (src/render/gpu.rs,
-// sample_offsets) are grouped by the triangle they see; each triangle seen by c of them is
-// shaded once, at the mean of its samples' points (inside it: the triangle is convex), and
-// counts for c / K of the pixel's area, its footprint widths (a, b) scaled by the extent of
-// its samples across the pixel in u and in v (max - min + 1/K; 1 for a whole pixel). A pixel
-// whose samples all see one triangle is shaded at its centre (the samples' mean) for its
-// whole area: exactly the single-sample result. The range output is the covered samples'
-// mean range, with the covered fraction of the samples; in footprint mode the widths are
-// those of the triangle seen by the most samples (an approximation where a pixel spans
-// surfaces at different ranges). With COVERAGE (analytic coverage, SAMPLES = 1) the parts
-// come from coverage_parts instead: exact visible areas, each shaded at its centroid.
+// The parts of pixel (col, row) of attitude `layer`, shaded into `out` (its values) and
+// `acc`. The pixel's K visibility samples (src/render/gpu.rs, sample_offsets) are grouped
+// by the flat surface they see (the faces of a flat, finely tessellated panel form one,
+// Mesh::surfaces; each face of a smoothly shaded mesh is its own); each surface seen by c
+// of them is shaded once, on the plane of the triangle its first sample sees, at the mean
+// of its samples' points, and counts for c / K of the pixel's area, its footprint widths
+// (a, b) scaled by the extent of its samples across the pixel in u and in v (max - min +
+// 1/K; 1 for a whole pixel). On a flat surface the BRDF does not vary and the range is
+// linear, so this is what shading each triangle's samples apart would add up to. A pixel
+// whose samples all see one surface is shaded at its centre (the samples' mean) for its
+// whole area: exactly the single-sample result. With COVERAGE (analytic coverage, SAMPLES = 1) the parts come from
+// coverage_parts instead: exact visible areas, each shaded at its centroid.
 // Twin: render::twin::render_cpu.
+fn pixel_parts(col: u32, row: u32, layer: u32, cap: f32,
+               out: ptr<function, array<f32, 16>>, acc: ptr<function, PixelAcc>) {
+    if (COVERAGE) {
+        // candidates: the distinct triangles seen at the 3x3 neighbourhood's centres
+        var cand: array<u32, 9>;
+        var n_cand = 0u;
+        var n_hit = 0u;
+        for (var dr = -1; dr <= 1; dr++) {
+            for (var dc = -1; dc <= 1; dc++) {
+                let r = i32(row) + dr;
+                let c = i32(col) + dc;
+                var id = 0u;
+                if (r >= 0 && r < i32(params.height) && c >= 0 && c < i32(params.width)) {
+                    id = textureLoad(tri_ids, vec2<i32>(c, r), i32(layer), 0).x;
+                }
+                if (id == 0u || id > params.n_tri) {
+                    continue;
+                }
+                n_hit++;
+                var k = 0u;
+                while (k < n_cand && cand[k] != id - 1u) {
+                    k++;
+                }
+                if (k == n_cand) {
+                    cand[k] = id - 1u;
+                    n_cand++;
+                }
+            }
+        }
+        if (n_cand == 1u && n_hit == 9u) {
+            // one triangle at all nine centres contains their hull, so the whole pixel
+            shade_part(layer, col, row, Part(cand[0], 1.0, vec2<f32>(0.5), vec2<f32>(1.0)),
+                       cap, out, acc);
+            return;
+        }
+        if (n_cand == 0u) {
+            return;
+        }
+        var parts: array<Part, 32>;
+        var n_parts = coverage_parts(col, row, layer, cand, n_cand, &parts);
+        if (n_parts == OVERFLOW) {
+            // too many triangles: the centre sample, as with one sample per pixel
+            let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
+            n_parts = 0u;
+            if (id > 0u && id <= params.n_tri) {
+                parts[0] = Part(id - 1u, 1.0, vec2<f32>(0.5), vec2<f32>(1.0));
+                n_parts = 1u;
+            }
+        }
+        for (var k = 0u; k < n_parts; k++) {
+            shade_part(layer, col, row, parts[k], cap, out, acc);
+        }
+        return;
+    }
+    if (SAMPLES == 1u) {
+        // the pixel centre alone
+        let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
+        if (id > 0u && id <= params.n_tri) {
+            let x = -params.ext + (f32(col) + 0.5) * params.pix;
+            let y = params.ext - (f32(row) + 0.5) * params.pix;
+            let h = shade_at(id - 1u, layer, x, y, out);
+            if (h.w != 0.0) {
+                *acc = PixelAcc(1.0, h.x, h.yz, 1.0);
+                var g: array<f32, 16>;
+                for (var ch = 0u; ch < CHANNELS; ch++) {
+                    g[ch] = clamp((*out)[ch], -cap, cap);
+                }
+                if (WRITE_PROFILE && g[0] != 0.0) {
+                    add_profile(layer, h.x, h.y, h.z, &g);
+                }
+            }
+        }
+        return;
+    }
+    let n_s = SAMPLES;
+    // the triangle (id + 1) and the flat surface (Mesh::surfaces, + 1) each sample sees
+    var ids: array<u32, 16>;
+    var sids: array<u32, 16>;
+    for (var k = 0u; k < n_s; k++) {
+        let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer * n_s + k), 0).x;
+        ids[k] = select(0u, id, id <= params.n_tri);
+        if (ids[k] != 0u) {
+            sids[k] = bitcast<u32>(geometry[3u * (id - 1u) + 1u].w) + 1u;
+        }
+    }
+    // bit k of `done`: sample k is empty or in a group already shaded. One loop
+    // iteration per group, in the order of their first samples (not one per sample:
+    // lavapipe runs a branch masked for every invocation of a SIMD batch, and the loop's
+    // exit test is what skips work nobody needs).
+    var done = 0u;
+    for (var k = 0u; k < n_s; k++) {
+        done |= select(0u, 1u << k, ids[k] == 0u);
+    }
+    let all = (1u << n_s) - 1u;
+    while (done != all) {
+        let k = firstTrailingBit(~done);
+        let id = ids[k];
+        let sid = sids[k];
+        var c = 0u;
+        var su = 0.0;
+        var sv = 0.0;
+        var lo = vec2<f32>(1.0);
+        var hi = vec2<f32>(0.0);
+        for (var k2 = k; k2 < n_s; k2++) {
+            if (sids[k2] == sid) {
+                done |= 1u << k2;
+                c += 1u;
+                let o = params.offsets[k2].xy;
+                su += o.x;
+                sv += o.y;
+                lo = min(lo, o);
+                hi = max(hi, o);
+            }
+        }
+        // the footprint of the part of the pixel its samples span (a whole pixel: 1)
+        let part = Part(id - 1u, f32(c) / f32(n_s), vec2<f32>(su, sv) / f32(c),
+                        hi - lo + vec2<f32>(1.0 / f32(n_s)));
+        shade_part(layer, col, row, part, cap, out, acc);
+    }
+}
+
+// Write a shaded pixel's image channels and its range (the covered parts' mean range, with
+// the covered fraction; in footprint mode the widths are those of its largest part, an
+// approximation where a pixel spans surfaces at different ranges).
+fn write_pixel(pix_index: u32, out: ptr<function, array<f32, 16>>, acc: PixelAcc) {
+    if (WRITE_IMAGE) {
+        for (var c = 0u; c < CHANNELS; c++) {
+            image[pix_index * CHANNELS + c] = (*out)[c];
+        }
+    }
+    if (WRITE_RANGE) {
+        let r_out = select(bitcast<f32>(0x7fc00000u), acc.r_sum / acc.cov, acc.cov > 0.0);
+        if (WRITE_FOOTPRINT) {
+            range_img[4u * pix_index] = r_out;
+            range_img[4u * pix_index + 1u] = acc.w_big.x;
+            range_img[4u * pix_index + 2u] = acc.w_big.y;
+            range_img[4u * pix_index + 3u] = acc.cov;
+        } else {
+            range_img[2u * pix_index] = r_out;
+            range_img[2u * pix_index + 1u] = acc.cov;
+        }
+    }
+}
+
+// The clamp bound of every channel (|M_ij| <= M00) for the fixed-point sums.
+fn channel_cap() -> f32 {
+    return 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
+}
+
+// One invocation per pixel (pixel_parts), its values added to the total by a workgroup
+// reduction.
 @compute @workgroup_size(8, 8, 1)
 fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
            @builtin(local_invocation_index) lidx: u32) {
@@ -863,139 +1015,13 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
     let row = gid.y;
     let layer = gid.z;
     let inside = col < params.width && row < params.height;
-    var out: array<f32, 16>;
-    var acc_out: array<f32, 16>; // out, clamped for the fixed-point sums
-    // bound every channel (|M_ij| <= M00) for the fixed-point sums
-    let cap = 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
+    var acc_out: array<f32, 16>; // the pixel's values, clamped for the fixed-point sums
     if (inside) {
-        let n_s = SAMPLES;
-        // (covered fraction, covered fraction x range, footprint widths of the largest part)
+        let cap = channel_cap();
+        var out: array<f32, 16>;
         var acc = PixelAcc(0.0, 0.0, vec2<f32>(0.0), 0.0);
-        if (COVERAGE) {
-            // candidates: the distinct triangles seen at the 3x3 neighbourhood's centres
-            var cand: array<u32, 9>;
-            var n_cand = 0u;
-            var n_hit = 0u;
-            for (var dr = -1; dr <= 1; dr++) {
-                for (var dc = -1; dc <= 1; dc++) {
-                    let r = i32(row) + dr;
-                    let c = i32(col) + dc;
-                    var id = 0u;
-                    if (r >= 0 && r < i32(params.height) && c >= 0 && c < i32(params.width)) {
-                        id = textureLoad(tri_ids, vec2<i32>(c, r), i32(layer), 0).x;
-                    }
-                    if (id == 0u || id > params.n_tri) {
-                        continue;
-                    }
-                    n_hit++;
-                    var k = 0u;
-                    while (k < n_cand && cand[k] != id - 1u) {
-                        k++;
-                    }
-                    if (k == n_cand) {
-                        cand[k] = id - 1u;
-                        n_cand++;
-                    }
-                }
-            }
-            var parts: array<Part, 32>;
-            var n_parts = 0u;
-            if (n_cand == 1u && n_hit == 9u) {
-                // one triangle at all nine centres contains their hull, so the whole pixel
-                parts[0] = Part(cand[0], 1.0, vec2<f32>(0.5), vec2<f32>(1.0));
-                n_parts = 1u;
-            } else if (n_cand > 0u) {
-                n_parts = coverage_parts(col, row, layer, cand, n_cand, &parts);
-                if (n_parts == OVERFLOW) {
-                    // too many triangles: the centre sample, as with one sample per pixel
-                    let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
-                    n_parts = 0u;
-                    if (id > 0u && id <= params.n_tri) {
-                        parts[0] = Part(id - 1u, 1.0, vec2<f32>(0.5), vec2<f32>(1.0));
-                        n_parts = 1u;
-                    }
-                }
-            }
-            for (var k = 0u; k < n_parts; k++) {
-                shade_part(layer, col, row, parts[k], cap, &out, &acc);
-            }
-        } else if (SAMPLES == 1u) {
-            // the pixel centre alone
-            let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
-            if (id > 0u && id <= params.n_tri) {
-                let x = -params.ext + (f32(col) + 0.5) * params.pix;
-                let y = params.ext - (f32(row) + 0.5) * params.pix;
-                let h = shade_at(id - 1u, layer, x, y, &out);
-                if (h.w != 0.0) {
-                    acc = PixelAcc(1.0, h.x, h.yz, 1.0);
-                    var g: array<f32, 16>;
-                    for (var ch = 0u; ch < CHANNELS; ch++) {
-                        g[ch] = clamp(out[ch], -cap, cap);
-                    }
-                    if (WRITE_PROFILE && g[0] != 0.0) {
-                        add_profile(layer, h.x, h.y, h.z, &g);
-                    }
-                }
-            }
-        } else {
-            var ids: array<u32, 16>;
-            for (var k = 0u; k < n_s; k++) {
-                let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer * n_s + k), 0).x;
-                ids[k] = select(0u, id, id <= params.n_tri);
-            }
-            // bit k of `done`: sample k is empty or in a group already shaded. One loop
-            // iteration per group, in the order of their first samples (not one per
-            // sample: lavapipe runs a branch masked for every invocation of a SIMD batch,
-            // and the loop's exit test is what skips work nobody needs).
-            var done = 0u;
-            for (var k = 0u; k < n_s; k++) {
-                done |= select(0u, 1u << k, ids[k] == 0u);
-            }
-            let all = (1u << n_s) - 1u;
-            while (done != all) {
-                let k = firstTrailingBit(~done);
-                let id = ids[k];
-                var c = 0u;
-                var su = 0.0;
-                var sv = 0.0;
-                var lo = vec2<f32>(1.0);
-                var hi = vec2<f32>(0.0);
-                for (var k2 = k; k2 < n_s; k2++) {
-                    if (ids[k2] == id) {
-                        done |= 1u << k2;
-                        c += 1u;
-                        let o = params.offsets[k2].xy;
-                        su += o.x;
-                        sv += o.y;
-                        lo = min(lo, o);
-                        hi = max(hi, o);
-                    }
-                }
-                // the footprint of the part of the pixel its samples span (a whole pixel: 1)
-                let part = Part(id - 1u, f32(c) / f32(n_s), vec2<f32>(su, sv) / f32(c),
-                                hi - lo + vec2<f32>(1.0 / f32(n_s)));
-                shade_part(layer, col, row, part, cap, &out, &acc);
-            }
-        }
-        let pix_index = (layer * params.height + row) * params.width + col;
-        if (WRITE_IMAGE) {
-            for (var c = 0u; c < CHANNELS; c++) {
-                image[pix_index * CHANNELS + c] = out[c];
-            }
-        }
-        if (WRITE_RANGE) {
-            let r_out = select(bitcast<f32>(0x7fc00000u), acc.r_sum / acc.cov, acc.cov > 0.0);
-            let cov = acc.cov;
-            if (WRITE_FOOTPRINT) {
-                range_img[4u * pix_index] = r_out;
-                range_img[4u * pix_index + 1u] = acc.w_big.x;
-                range_img[4u * pix_index + 2u] = acc.w_big.y;
-                range_img[4u * pix_index + 3u] = cov;
-            } else {
-                range_img[2u * pix_index] = r_out;
-                range_img[2u * pix_index + 1u] = cov;
-            }
-        }
+        pixel_parts(col, row, layer, cap, &out, &acc);
+        write_pixel((layer * params.height + row) * params.width + col, &out, acc);
         for (var c = 0u; c < CHANNELS; c++) {
             acc_out[c] = clamp(out[c], -cap, cap);
         }

@@ -19,6 +19,8 @@ pub struct Mesh {
     pub closed: bool,
     /// [`Mesh::adjacency`], computed on first use.
     adjacency: std::sync::OnceLock<Vec<[u32; 3]>>,
+    /// [`Mesh::surfaces`], computed on first use.
+    surfaces: std::sync::OnceLock<Vec<u32>>,
 }
 
 /// Whether a triangle mesh is a union of closed, outward-wound surfaces: every directed
@@ -178,6 +180,7 @@ impl Mesh {
             radius,
             closed,
             adjacency: std::sync::OnceLock::new(),
+            surfaces: std::sync::OnceLock::new(),
         })
     }
 
@@ -212,15 +215,88 @@ impl Mesh {
         })
     }
 
-    /// The de-indexed GPU geometry: `3 T` corners `(x, y, z, bits(material))`, then, with
-    /// normals, `3 T` corner normals `(nx, ny, nz, 0)`.
+    /// For each face, the flat surface it belongs to: the lowest-numbered face of the set
+    /// of faces joined to it through shared edges ([`Mesh::adjacency`]) that have its
+    /// material and, within [`SURFACE_ANGLE`], its plane (normals parallel and pointing the
+    /// same way; sharing an edge, they then share the plane), each compared with the set's
+    /// first face. Every face is its own surface when the mesh has vertex normals (smooth
+    /// shading varies across a face). On one flat surface, under the renderer's
+    /// directional illumination and orthographic view, the Mueller BRDF is the same at
+    /// every point and the range is linear, so the samples of a pixel that see different
+    /// faces of one surface are shaded as one part (`shaders/shade.wgsl`,
+    /// [`crate::render::twin::sampled_parts`]): a finely tessellated panel costs what one
+    /// large face does.
+    pub fn surfaces(&self) -> &[u32] {
+        self.surfaces.get_or_init(|| {
+            let n_f = self.faces.len();
+            let mut surf: Vec<u32> = (0..n_f as u32).collect();
+            if self.normals.is_some() {
+                return surf;
+            }
+            let normal = |t: usize| -> Option<[f64; 3]> {
+                let p = self.faces[t].map(|k| self.vertices[k as usize]);
+                let e1 = [0, 1, 2].map(|d| p[1][d] - p[0][d]);
+                let e2 = [0, 1, 2].map(|d| p[2][d] - p[0][d]);
+                let c = [
+                    e1[1] * e2[2] - e1[2] * e2[1],
+                    e1[2] * e2[0] - e1[0] * e2[2],
+                    e1[0] * e2[1] - e1[1] * e2[0],
+                ];
+                let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+                (l > 0.0 && l.is_finite()).then(|| c.map(|x| x / l))
+            };
+            let normals: Vec<Option<[f64; 3]>> = (0..n_f).map(normal).collect();
+            let adj = self.adjacency();
+            let mut seen = vec![false; n_f];
+            let mut stack = Vec::new();
+            for root in 0..n_f {
+                if seen[root] {
+                    continue;
+                }
+                seen[root] = true;
+                let Some(n0) = normals[root] else {
+                    continue;
+                };
+                stack.push(root);
+                while let Some(t) = stack.pop() {
+                    for &u in &adj[t] {
+                        let u = u as usize;
+                        if u == u32::MAX as usize || seen[u] || self.face_material[u] != self.face_material[root] {
+                            continue;
+                        }
+                        let Some(n) = normals[u] else {
+                            continue;
+                        };
+                        let c = [
+                            n[1] * n0[2] - n[2] * n0[1],
+                            n[2] * n0[0] - n[0] * n0[2],
+                            n[0] * n0[1] - n[1] * n0[0],
+                        ];
+                        let dot = n[0] * n0[0] + n[1] * n0[1] + n[2] * n0[2];
+                        if dot > 0.0 && (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() <= SURFACE_ANGLE {
+                            seen[u] = true;
+                            surf[u] = root as u32;
+                            stack.push(u);
+                        }
+                    }
+                }
+            }
+            surf
+        })
+    }
+
+    /// The de-indexed GPU geometry: `3 T` corners `(x, y, z, w)`, `w` the bits of the
+    /// face's material at its first corner and of its surface ([`Mesh::surfaces`]) at its
+    /// second, then, with normals, `3 T` corner normals `(nx, ny, nz, 0)`.
     pub fn gpu_geometry(&self) -> Vec<[f32; 4]> {
         let t = self.faces.len();
         let mut out = Vec::with_capacity(if self.normals.is_some() { 6 * t } else { 3 * t });
-        for (f, &m) in self.faces.iter().zip(&self.face_material) {
-            for &k in f {
+        let surf = self.surfaces();
+        for ((f, &m), &s) in self.faces.iter().zip(&self.face_material).zip(surf) {
+            for (c, &k) in f.iter().enumerate() {
                 let v = self.vertices[k as usize];
-                out.push([v[0] as f32, v[1] as f32, v[2] as f32, f32::from_bits(m)]);
+                let w = if c == 1 { s } else { m };
+                out.push([v[0] as f32, v[1] as f32, v[2] as f32, f32::from_bits(w)]);
             }
         }
         if let Some(ns) = &self.normals {
@@ -235,6 +311,12 @@ impl Mesh {
         out
     }
 }
+
+/// Largest angle (rad, as the sine between unit normals) between the planes of two faces
+/// of one flat surface ([`Mesh::surfaces`]): far below what the shading resolves (the f32
+/// kernel matches its f64 twin to 1e-4 relative), far above the rounding of a flat face's
+/// normal in f64.
+pub const SURFACE_ANGLE: f64 = 1e-7;
 
 /// A rotation matrix (row-major, `p_tel = R p_body`).
 pub type Rot = [[f64; 3]; 3];
@@ -362,6 +444,46 @@ mod tests {
         let v = rotate(&t, body);
         assert!(v[0].abs() < 1e-15 && v[1].abs() < 1e-15 && (v[2] - 1.0).abs() < 1e-15);
         assert_eq!(transmitter_rotation(&r[0], 0.0), r[0]);
+    }
+
+    #[test]
+    fn flat_surfaces_join_coplanar_faces_of_one_material() {
+        // a cube: six surfaces of two faces each, numbered by their first face
+        let (v, f) = cube([0.0; 3], 0);
+        let m = Mesh::new(v.clone(), f.clone(), None, vec![0; 12], 1).unwrap();
+        assert_eq!(m.surfaces(), &[0, 0, 2, 2, 4, 4, 6, 6, 8, 8, 10, 10]);
+        // two materials on one face: two surfaces
+        let mut fm = vec![0; 12];
+        fm[1] = 1;
+        let m = Mesh::new(v.clone(), f.clone(), None, fm, 2).unwrap();
+        assert_eq!(&m.surfaces()[..2], &[0, 1]);
+        // with vertex normals (smooth shading) every face is its own
+        let m = Mesh::new(v.clone(), f.clone(), Some(v.clone()), vec![0; 12], 1).unwrap();
+        assert_eq!(m.surfaces(), (0..12).collect::<Vec<u32>>());
+        // a square of 2 x 8 x 8 faces on unwelded vertices, its last corner (in both faces of
+        // the last cell) lifted out of the plane by 1e-9 (slopes of 1e-8, below
+        // SURFACE_ANGLE: still flat) or by 1e-6 (slopes of 1e-5: those two faces are not)
+        for (lift, joined) in [(0.0, 128), (1e-9, 128), (1e-6, 126)] {
+            let (mut v, mut f) = (Vec::new(), Vec::new());
+            for i in 0..8 {
+                for j in 0..8 {
+                    let c = |a: usize, b: usize| {
+                        let z = if a + b == 16 { lift } else { 0.0 };
+                        [a as f64 * 0.1, b as f64 * 0.1, z]
+                    };
+                    let q = [c(i, j), c(i + 1, j), c(i + 1, j + 1), c(i, j + 1)];
+                    for t in [[0, 1, 2], [0, 2, 3]] {
+                        let k = v.len() as u32;
+                        v.extend(t.map(|x| q[x]));
+                        f.push([k, k + 1, k + 2]);
+                    }
+                }
+            }
+            let m = Mesh::new(v, f, None, vec![0; 128], 1).unwrap();
+            let s = m.surfaces();
+            let n0 = s.iter().filter(|&&x| x == 0).count();
+            assert_eq!(n0, joined, "lift {lift}");
+        }
     }
 
     #[test]

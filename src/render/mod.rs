@@ -21,10 +21,12 @@
 //! centre at `X = -ext + (j + 1/2) delta`, `Y = ext - (i + 1/2) delta`, `delta = 2 ext / W`.
 //! Visibility is sampled (rasterization) at `K` points of each pixel (`samples`, a power
 //! of two up to 16; [`gpu::sample_offsets`]: a (0, m, 2)-net, `K = 1` the centre). Each
-//! triangle seen by `c` of them counts for `c / K` of the pixel's area and is shaded once,
-//! at the mean of its samples' points; a pixel whose samples all see one triangle is
-//! shaded at its centre for its whole area. The coverage output is the covered fraction
-//! of the samples, the range their mean.
+//! flat surface ([`geometry::Mesh::surfaces`]: faces joined by edges, coplanar, of one
+//! material, flat-shaded; each face of a smooth-shaded mesh is its own) seen by `c` of them
+//! counts for `c / K` of the pixel's area and is shaded once, on the plane of the triangle
+//! its first sample sees, at the mean of its samples' points; a pixel whose samples all
+//! see one surface is shaded at its centre for its whole area. The coverage output is the
+//! covered fraction of the samples, the range their mean.
 //!
 //! **Illumination and cast shadows.** A visible point is lit when `cos(theta_i) > 0` and
 //! `cos(theta_o) > 0` (shading normal) and, bistatic (`beta > 0`), it is not in the

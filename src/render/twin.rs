@@ -305,10 +305,11 @@ pub struct Part {
 }
 
 /// A pixel's parts from its K visibility samples (`ids[k]` the sample-`k` id map, `offsets`
-/// the samples' points): the samples grouped by the triangle they see, in the order of
-/// their first sample; each group covers `c / K` of the pixel, is shaded at the mean of its
-/// points and spans their extent plus `1 / K` (twin of the K > 1 loop of `shade.wgsl`).
-pub fn sampled_parts(ids: &[Vec<u32>], offsets: &[[f64; 2]], pixel: usize) -> Vec<Part> {
+/// the samples' points, `surfaces` [`Mesh::surfaces`]): the samples grouped by the flat
+/// surface they see, in the order of their first sample; each group is shaded on the
+/// triangle its first sample sees, covers `c / K` of the pixel, is shaded at the mean of
+/// its points and spans their extent plus `1 / K` (twin of the K > 1 loop of `shade.wgsl`).
+pub fn sampled_parts(ids: &[Vec<u32>], offsets: &[[f64; 2]], surfaces: &[u32], pixel: usize) -> Vec<Part> {
     let n_s = offsets.len() as f64;
     // (id, count, sum u, sum v, [min u, max u, min v, max v])
     #[allow(clippy::type_complexity)]
@@ -318,7 +319,8 @@ pub fn sampled_parts(ids: &[Vec<u32>], offsets: &[[f64; 2]], pixel: usize) -> Ve
         if id == 0 {
             continue;
         }
-        match groups.iter_mut().find(|g| g.0 == id) {
+        let surf = surfaces[id as usize - 1];
+        match groups.iter_mut().find(|g| surfaces[g.0 as usize - 1] == surf) {
             Some(g) => {
                 g.1 += 1;
                 g.2 += uv[0];
@@ -645,7 +647,7 @@ pub fn render_cpu(
                 let parts = if sensor.analytic {
                     analytic_parts(mesh, rot, &lay, &ids[0], row, col)
                 } else {
-                    sampled_parts(&ids, &offsets, k)
+                    sampled_parts(&ids, &offsets, mesh.surfaces(), k)
                 };
                 let (mut cov_sum, mut r_sum) = (0.0f64, 0.0f64);
                 let mut pixel = vec![0.0f64; ch];
