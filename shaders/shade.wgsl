@@ -1001,11 +1001,6 @@ fn write_pixel(pix_index: u32, out: ptr<function, array<f32, 16>>, acc: PixelAcc
     }
 }
 
-// The clamp bound of every channel (|M_ij| <= M00) for the fixed-point sums.
-fn channel_cap() -> f32 {
-    return 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
-}
-
 // One invocation per pixel (pixel_parts), its values added to the total by a workgroup
 // reduction.
 @compute @workgroup_size(8, 8, 1)
@@ -1017,7 +1012,8 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>,
     let inside = col < params.width && row < params.height;
     var acc_out: array<f32, 16>; // the pixel's values, clamped for the fixed-point sums
     if (inside) {
-        let cap = channel_cap();
+        // bound every channel (|M_ij| <= M00) for the fixed-point sums
+        let cap = 2.305843e18 / (params.fix_scale * f32(params.width * params.height));
         var out: array<f32, 16>;
         var acc = PixelAcc(0.0, 0.0, vec2<f32>(0.0), 0.0);
         pixel_parts(col, row, layer, cap, &out, &acc);

@@ -227,6 +227,7 @@ impl Mesh {
     /// [`crate::render::twin::sampled_parts`]): a finely tessellated panel costs what one
     /// large face does.
     pub fn surfaces(&self) -> &[u32] {
+        use crate::optics::frames::{cross, dot, norm};
         self.surfaces.get_or_init(|| {
             let n_f = self.faces.len();
             let mut surf: Vec<u32> = (0..n_f as u32).collect();
@@ -237,12 +238,8 @@ impl Mesh {
                 let p = self.faces[t].map(|k| self.vertices[k as usize]);
                 let e1 = [0, 1, 2].map(|d| p[1][d] - p[0][d]);
                 let e2 = [0, 1, 2].map(|d| p[2][d] - p[0][d]);
-                let c = [
-                    e1[1] * e2[2] - e1[2] * e2[1],
-                    e1[2] * e2[0] - e1[0] * e2[2],
-                    e1[0] * e2[1] - e1[1] * e2[0],
-                ];
-                let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+                let c = cross(e1, e2);
+                let l = norm(c);
                 (l > 0.0 && l.is_finite()).then(|| c.map(|x| x / l))
             };
             let normals: Vec<Option<[f64; 3]>> = (0..n_f).map(normal).collect();
@@ -267,13 +264,7 @@ impl Mesh {
                         let Some(n) = normals[u] else {
                             continue;
                         };
-                        let c = [
-                            n[1] * n0[2] - n[2] * n0[1],
-                            n[2] * n0[0] - n[0] * n0[2],
-                            n[0] * n0[1] - n[1] * n0[0],
-                        ];
-                        let dot = n[0] * n0[0] + n[1] * n0[1] + n[2] * n0[2];
-                        if dot > 0.0 && (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() <= SURFACE_ANGLE {
+                        if dot(n, n0) > 0.0 && norm(cross(n, n0)) <= SURFACE_ANGLE {
                             seen[u] = true;
                             surf[u] = root as u32;
                             stack.push(u);
