@@ -93,8 +93,9 @@ struct Params {
     max_extent: f32,   // cap on the sub-pixel range widths (m)
     tx_width: u32,     // side of the transmitter's id map (texels; SHADOWS only)
     closed: u32,       // 1: closed mesh, back faces culled (Mesh::closed)
-    offsets: array<vec4<f32>, 16>, // the SAMPLES visibility samples' (u, v) in the pixel
-                                   // (from its top-left corner; tri_ids layers l K .. l K + K - 1)
+    offsets: array<vec4<f32>, 16>, // per visibility sample (u, v, dc, dr): its offset in the
+                                   // pixel (from its top-left corner) and, SAMPLES >= 4, the
+                                   // tile texel holding it relative to the pixel's (sample_id)
 }
 
 @group(0) @binding(0) var tri_ids: texture_2d_array<u32>;
@@ -109,6 +110,10 @@ struct Params {
 // triangle id + 1 seen from the transmitter, tx_width^2 per layer (SHADOWS only;
 // monostatic, tri_ids is bound here and never read)
 @group(0) @binding(9) var tx_ids: texture_2d_array<u32>;
+// SAMPLES >= 4: the receiver's triangle ids + 1 from 4x multisampled tiles of
+// (width + 2)^2 texels, one per raster pass of each attitude (gather.wgsl); tri_ids is then
+// a placeholder, as this is otherwise
+@group(0) @binding(10) var<storage, read> sample_ids: array<u32>;
 
 var<workgroup> wg_sum: array<f32, 1024>;
 
@@ -857,6 +862,21 @@ fn shade_part(layer: u32, col: u32, row: u32, part: Part, cap: f32,
 // whole area: exactly the single-sample result. With COVERAGE (analytic coverage, SAMPLES = 1) the parts come from
 // coverage_parts instead: exact visible areas, each shaded at its centroid.
 // Twin: render::twin::render_cpu.
+// Triangle id + 1 (0: none) seen by visibility sample k (SAMPLES > 1) of pixel (col, row)
+// of attitude `layer`: K < 4, layer l K + k of tri_ids; K >= 4 (msaa_samples in
+// src/render/gpu.rs), sample k % 4 of texel (col + 1 + dc, row + 1 + dr) of pass k / 4's
+// tile, as gather.wgsl stored it.
+fn sample_id(col: u32, row: u32, layer: u32, k: u32) -> u32 {
+    if (SAMPLES < 4u) {
+        return textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer * SAMPLES + k), 0).x;
+    }
+    let side = params.width + 2u;
+    let o = params.offsets[k];
+    let x = u32(i32(col + 1u) + i32(o.z));
+    let y = u32(i32(row + 1u) + i32(o.w));
+    return sample_ids[(((layer * (SAMPLES / 4u) + k / 4u) * side + y) * side + x) * 4u + k % 4u];
+}
+
 fn pixel_parts(col: u32, row: u32, layer: u32, cap: f32,
                out: ptr<function, array<f32, 16>>, acc: ptr<function, PixelAcc>) {
     if (COVERAGE) {
@@ -936,7 +956,7 @@ fn pixel_parts(col: u32, row: u32, layer: u32, cap: f32,
     var ids: array<u32, 16>;
     var sids: array<u32, 16>;
     for (var k = 0u; k < n_s; k++) {
-        let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer * n_s + k), 0).x;
+        let id = sample_id(col, row, layer, k);
         ids[k] = select(0u, id, id <= params.n_tri);
         if (ids[k] != 0u) {
             sids[k] = bitcast<u32>(geometry[3u * (id - 1u) + 1u].w) + 1u;

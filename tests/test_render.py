@@ -390,7 +390,12 @@ def test_a_finely_tessellated_plate_renders_as_a_coarse_one():
     faces renders as the same plate of 2 (images to 1e-5 of their peak, profile and total
     to 1e-6 of the total: f32 rounding; shading the faces apart puts profile bins up to
     0.4% off, each face's samples spanning less of the pixel's range footprint), and the
-    total computed without a profile (a workgroup reduction) equals the profile's sum."""
+    total computed without a profile (a workgroup reduction) equals the profile's sum.
+    The rasterizer snaps vertices to 1/256 pixel, so the fine plate's rim (16 segments per
+    side) and the coarse one's (one) may put a sample within that of the rim on different
+    sides (the front face, the plate's edge face or the background): such pixels on the
+    silhouette (at most 2 here; one, off by one sample of 8, in the run that set this) are
+    left out of the image comparison, and their values widen the profile's tolerance."""
     mat = pprender.Material("beckmann", alpha=0.3, eta=1.5 + 0.0j, terms=("single",))
     fine_mesh = models.plate(0.3, 0.2, 0.01, detail=4)
     assert len(fine_mesh.faces) == 4 * 4**4 + 8 * 2**4
@@ -402,10 +407,13 @@ def test_a_finely_tessellated_plate_renders_as_a_coarse_one():
     a = pprender.render(coarse, sensor, att, outputs=out)
     b = pprender.render(fine, sensor, att, outputs=out)
     total = a.cross_section[0, 0]
-    np.testing.assert_allclose(b.stokes, a.stokes, rtol=0, atol=1e-5 * np.abs(a.stokes[..., 0]).max())
-    np.testing.assert_allclose(b.profile, a.profile, rtol=0, atol=1e-6 * total)
-    np.testing.assert_allclose(b.cross_section, a.cross_section, rtol=1e-6)
+    atol = 1e-5 * np.abs(a.stokes[..., 0]).max()
+    tie = np.any(np.abs(b.stokes - a.stokes) > atol, axis=-1)
+    assert tie.sum() <= 2 and np.all(a.coverage[tie] < 1) and np.all(b.coverage[tie] < 1)
+    slack = np.abs(a.stokes[tie][:, 0]).sum() + np.abs(b.stokes[tie][:, 0]).sum()
+    np.testing.assert_allclose(b.profile, a.profile, rtol=0, atol=1e-6 * total + slack)
+    np.testing.assert_allclose(b.cross_section, a.cross_section, rtol=1e-6 + slack / total)
     np.testing.assert_array_equal(np.isnan(b.range), np.isnan(a.range))
-    for scene in (coarse, fine):
+    for scene, full in ((coarse, a), (fine, b)):
         only = pprender.render(scene, sensor, att, outputs=("cross_section",))
-        np.testing.assert_allclose(only.cross_section, a.cross_section, rtol=1e-6)
+        np.testing.assert_allclose(only.cross_section, full.cross_section, rtol=1e-6)

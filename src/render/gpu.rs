@@ -66,6 +66,16 @@ pub struct Gpu {
     limits: wgpu::Limits,
     vis_layout: wgpu::BindGroupLayout,
     vis_pipeline: [wgpu::RenderPipeline; 2],
+    /// The same at [`MSAA`] samples per texel, ids as `f32` (`fs_float`), into the tiles
+    /// of `K >= 4` ([`MsaaTiles`]), and the kernel that gathers them (`gather.wgsl`).
+    vis_pipeline_msaa: [wgpu::RenderPipeline; 2],
+    gather_layout: wgpu::BindGroupLayout,
+    gather_pipeline: wgpu::ComputePipeline,
+    /// Placeholders for the shade kernel's id bindings that a request does not use: a
+    /// 1 x 1 layer array (binding 0 with `K >= 4`) and a 16-byte buffer (binding 10 with
+    /// `K < 4`).
+    dummy_ids: wgpu::TextureView,
+    dummy_buffer: wgpu::Buffer,
     shade_layout: wgpu::BindGroupLayout,
     shade_pipeline_layout: wgpu::PipelineLayout,
     shade_module: wgpu::ShaderModule,
@@ -216,7 +226,8 @@ impl Gpu {
         });
         // [no culling, back faces culled (closed, outward-wound meshes: Mesh::closed)];
         // the view maps the body's outward normals facing the viewer to counter-clockwise
-        let vis_pipeline = [None, Some(wgpu::Face::Back)].map(|cull_mode| {
+        let vis_pipelines = |count: u32, fs: &str, format| {
+            [None, Some(wgpu::Face::Back)].map(|cull_mode| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("visibility"),
                 layout: Some(&vis_pl),
@@ -239,13 +250,16 @@ impl Gpu {
                     stencil: Default::default(),
                     bias: Default::default(),
                 }),
-                multisample: Default::default(),
+                multisample: wgpu::MultisampleState {
+                    count,
+                    ..Default::default()
+                },
                 fragment: Some(wgpu::FragmentState {
                     module: &vis_module,
-                    entry_point: Some("fs_main"),
+                    entry_point: Some(fs),
                     compilation_options: Default::default(),
                     targets: &[Some(wgpu::ColorTargetState {
-                        format: wgpu::TextureFormat::R32Uint,
+                        format,
                         blend: None,
                         write_mask: wgpu::ColorWrites::ALL,
                     })],
@@ -253,8 +267,62 @@ impl Gpu {
                 multiview_mask: None,
                 cache: None,
             })
+            })
+        };
+        let vis_pipeline = vis_pipelines(1, "fs_main", wgpu::TextureFormat::R32Uint);
+        // R32Float: multisampled in core WebGPU (R32Uint needs an adapter-specific feature)
+        let vis_pipeline_msaa =
+            vis_pipelines(MSAA as u32, "fs_float", wgpu::TextureFormat::R32Float);
+        let dummy_ids = IdTarget::new(&device, "unused ids", 1, 1).array_view;
+        let dummy_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("unused"),
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
         });
         let cs = wgpu::ShaderStages::COMPUTE;
+        let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gather"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: true,
+                    },
+                    count: None,
+                },
+                storage(1, false, cs),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: true,
+                        min_binding_size: wgpu::BufferSize::new(16),
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let gather_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("gather.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::GATHER.into()),
+        });
+        let gather_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("gather"),
+            layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("gather"),
+                bind_group_layouts: &[Some(&gather_layout)],
+                immediate_size: 0,
+            })),
+            module: &gather_module,
+            entry_point: Some("cs_gather"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
         let shade_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("shade"),
             entries: &[
@@ -287,6 +355,8 @@ impl Gpu {
                     },
                     count: None,
                 },
+                // the receiver's ids with K >= 4 samples (gather.wgsl)
+                storage(10, true, cs),
             ],
         });
         let shade_pipeline_layout =
@@ -309,6 +379,11 @@ impl Gpu {
             limits,
             vis_layout,
             vis_pipeline,
+            vis_pipeline_msaa,
+            gather_layout,
+            gather_pipeline,
+            dummy_ids,
+            dummy_buffer,
             shade_layout,
             shade_pipeline_layout,
             shade_module,
@@ -396,8 +471,10 @@ pub struct ShadeParams {
     pub tx_width: u32,
     /// 1 for a closed mesh ([`Mesh::closed`]: back faces culled).
     pub closed: u32,
-    /// The visibility samples' offsets in the pixel `(u, v, 0, 0)` ([`sample_offsets`]; the
-    /// first [`SensorSetup::samples`], which the kernel has as the constant `SAMPLES`).
+    /// Per visibility sample `(u, v, dc, dr)`: its offset in the pixel ([`sample_offsets`])
+    /// and, with `K >= 4`, the texel of its raster pass's tile that holds it, relative to
+    /// the pixel's ([`msaa_samples`]; the first [`SensorSetup::samples`], which the kernel
+    /// has as the constant `SAMPLES`).
     pub offsets: [[f32; 4]; MAX_SAMPLES],
 }
 
@@ -414,43 +491,112 @@ struct VisParams {
 pub const MAX_SAMPLES: usize = 16;
 
 /// The `k` visibility samples of a pixel, `(u, v)` in pixel units from its top-left corner
-/// (`u` along `+X`, `v` down the rows): the first `k` points of the two-dimensional Sobol'
-/// sequence (van der Corput in `u`, Sobol's second dimension in `v`), shifted by
-/// `1 / (2k)`. For `k` a power of two they form a (0, m, 2)-net: every box
-/// `[a/2^i, (a+1)/2^i) x [b/2^j, (b+1)/2^j)` with `i + j = m` holds exactly one, so each
-/// row and each column of the `k x k` grid holds one sample ("n-rooks", an axis-aligned
-/// edge is resolved to `1/k` of a pixel) and, for `k = 4, 16`, so does each cell of the
-/// `sqrt(k)` grid. The samples' mean is the pixel centre. `k = 1` is the centre itself.
+/// (`u` along `+X`, `v` down the rows). Each row and each column of the `k x k` grid holds
+/// one sample ("n-rooks": an axis-aligned edge is resolved to `1/k` of a pixel), and for
+/// `k != 8` they form a (0, m, 2)-net: every box `[a/2^i, (a+1)/2^i) x [b/2^j, (b+1)/2^j)`
+/// with `i + j = m` holds exactly one (for `k = 4, 16` one per cell of the `sqrt(k)` grid;
+/// `k = 8`: two per quadrant). The set is symmetric under a half turn about the pixel
+/// centre, so their mean is the centre. `k = 1` is the centre itself, `k = 2` the first
+/// two points of the Sobol' sequence shifted by `1/4`; `k >= 4` are the rasterizer's
+/// standard 4x multisample positions, shifted per raster pass and wrapped into the pixel
+/// ([`msaa_samples`]).
 pub fn sample_offsets(k: usize) -> Vec<[f64; 2]> {
     assert!(k.is_power_of_two() && k <= MAX_SAMPLES);
-    let m = k.trailing_zeros();
-    // Sobol' dimension 2 direction numbers (bit-reversed Pascal matrix mod 2), 2^-i scaled
-    // to integers of m bits: v_i = m_i 2^(m - i), m_i = 1, 3, 5, 15
-    let dir = [1u32, 3, 5, 15];
-    (0..k as u32)
-        .map(|i| {
-            let u = if m == 0 {
-                0
-            } else {
-                i.reverse_bits() >> (32 - m)
-            };
-            let mut v = 0u32;
-            for b in 0..m {
-                if i >> b & 1 == 1 {
-                    v ^= dir[b as usize] << (m - 1 - b);
-                }
-            }
-            let kf = k as f64;
-            [(u as f64 + 0.5) / kf, (v as f64 + 0.5) / kf]
+    match k {
+        1 => vec![[0.5, 0.5]],
+        2 => vec![[0.25, 0.25], [0.75, 0.75]],
+        _ => msaa_samples(k).iter().map(|s| s.uv).collect(),
+    }
+}
+
+/// Samples per texel of the multisampled visibility raster (`K >= 4`).
+pub const MSAA: usize = 4;
+
+/// The standard 4x multisample positions in a texel, `(u, v)` from its top-left corner
+/// (WebGPU's, Vulkan's `standardSampleLocations`, Direct3D's and Metal's).
+const MSAA_POSITIONS: [[i32; 2]; MSAA] = [[6, 2], [14, 6], [2, 10], [10, 14]]; // / 16
+
+/// Per raster pass, the shift of the sample positions in units of `1 / (2k)` pixel for
+/// `k = 8, 16` (`k = 4`: one pass, none), found by exhaustive search over odd shifts: the
+/// `k` (wrapped) positions are symmetric under a half turn about the pixel centre (so a
+/// render is invariant under a half turn about the line of sight, as the scene is) and
+/// form a (0, m, 2)-net. For `k = 8` no symmetric net exists among these; the shifts
+/// `-+1/16` keep n-rooks and two samples per quadrant.
+const MSAA_SHIFTS_8: [[i32; 2]; 2] = [[-1, -1], [1, 1]];
+const MSAA_SHIFTS_16: [[i32; 2]; 4] = [[-13, -7], [-1, 5], [1, -5], [13, 7]];
+
+/// Where visibility sample `k` of a pixel comes from with `K >= 4`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MsaaSample {
+    /// Its position in the pixel, `(u, v)` from the top-left corner.
+    pub uv: [f64; 2],
+    /// The raster pass (tile of [`MsaaTiles`]) and the sample index in the texel.
+    pub pass: usize,
+    pub sample: usize,
+    /// The texel that holds it, `(column, row)` relative to the pixel's: pass `p` moves
+    /// the image by `-shift_p`, so its sample `s` in texel `t` sees the point
+    /// `t + position_s + shift_p`, which lies in a neighbouring pixel when
+    /// `position_s + shift_p` leaves `[0, 1)`.
+    pub texel: [i32; 2],
+}
+
+/// The `k >= 4` visibility samples in order `k = MSAA pass + sample`.
+pub fn msaa_samples(k: usize) -> Vec<MsaaSample> {
+    let shifts: &[[i32; 2]] = match k {
+        4 => &[[0, 0]],
+        8 => &MSAA_SHIFTS_8,
+        16 => &MSAA_SHIFTS_16,
+        _ => panic!("msaa_samples: K = {k} (4, 8 or 16)"),
+    };
+    let units = 2 * k as i32; // per pixel
+    let mut out = Vec::with_capacity(k);
+    for (pass, sh) in shifts.iter().enumerate() {
+        for (sample, pos) in MSAA_POSITIONS.iter().enumerate() {
+            let a = [0, 1].map(|i| pos[i] * units / 16 + sh[i]);
+            out.push(MsaaSample {
+                uv: a.map(|x| x.rem_euclid(units) as f64 / units as f64),
+                pass,
+                sample,
+                texel: a.map(|x| -x.div_euclid(units)),
+            });
+        }
+    }
+    out
+}
+
+/// The raster passes of `k` samples: per pass, the displacement `(du, dv)` (pixels, `v`
+/// down) that brings its sample points where the rasterizer samples: `K < 4`, one pass per
+/// sample, moved onto the texel centre; `K >= 4`, one multisampled pass per [`MSAA`]
+/// samples, moved by minus its shift.
+fn raster_displacements(k: usize) -> Vec<[f64; 2]> {
+    if k < MSAA {
+        return sample_offsets(k)
+            .iter()
+            .map(|o| [0.5 - o[0], 0.5 - o[1]])
+            .collect();
+    }
+    msaa_samples(k)
+        .chunks(MSAA)
+        .map(|c| {
+            let o = &c[0];
+            let p = MSAA_POSITIONS[o.sample];
+            // minus the shift: position - (uv - texel)
+            [0, 1].map(|i| p[i] as f64 / 16.0 - o.uv[i] + o.texel[i] as f64)
         })
         .collect()
 }
 
-/// [`sample_offsets`] as the uniform blocks hold them.
+/// [`sample_offsets`] (and the tile texels, [`msaa_samples`]) as the uniform block holds them.
 fn gpu_offsets(k: usize) -> [[f32; 4]; MAX_SAMPLES] {
     let mut o = [[0.0f32; 4]; MAX_SAMPLES];
     for (d, s) in o.iter_mut().zip(sample_offsets(k)) {
         *d = [s[0] as f32, s[1] as f32, 0.0, 0.0];
+    }
+    if k >= MSAA {
+        for (d, s) in o.iter_mut().zip(msaa_samples(k)) {
+            d[2] = s.texel[0] as f32;
+            d[3] = s.texel[1] as f32;
+        }
     }
     o
 }
@@ -762,19 +908,29 @@ pub fn render(
         ));
     }
     let w = lay.width;
-    if w as u32 > gpu.info.max_texture_dimension_2d {
+    // K >= 4: tiles of w + 2 texels (MsaaTiles)
+    let margin = if sensor.samples >= MSAA { 2 } else { 0 };
+    let max_dim = gpu.info.max_texture_dimension_2d as usize;
+    if w + margin > max_dim {
         return Err(Error::param(
             "resolution",
             w,
             format!(
                 "resolution x supersampling <= {} on this device",
-                gpu.info.max_texture_dimension_2d
+                max_dim - margin
             ),
         ));
     }
     let channels = sensor.channels();
     let n = rotations.len();
     let n_tri = mesh.faces.len();
+    if sensor.samples >= MSAA && n_tri >= 1 << 24 {
+        return Err(Error::param(
+            "pixel_samples",
+            sensor.samples,
+            format!("1 or 2 for a mesh of {n_tri} triangles (4 to 16 take up to 2^24 - 1)"),
+        ));
+    }
     let mut geometry = mesh.gpu_geometry();
     if sensor.analytic {
         // the triangles across each edge, for the kernel's candidate search (after the
@@ -812,17 +968,27 @@ pub fn render(
         } else {
             0
         },
-        px * 4 * sensor.samples as u64, // triangle indices
+        // triangle indices (K >= 4: gathered tiles with their margins)
+        ((w + margin) * (w + margin) * 4 * sensor.samples) as u64,
     ];
     let biggest = per_att.iter().copied().max().unwrap_or(1).max(1);
     let mut chunk = (max_binding / biggest).max(1) as usize;
+    if sensor.samples < MSAA {
+        chunk = chunk.min(gpu.limits.max_texture_array_layers as usize / sensor.samples);
+    } else if MsaaTiles::grid(w + 2, sensor.samples / MSAA, max_dim).is_none() {
+        return Err(Error::param(
+            "resolution",
+            w,
+            format!("a resolution x supersampling whose {} tiles of side + 2 texels fit a \
+                     {max_dim}-texel texture", sensor.samples / MSAA),
+        ));
+    }
     chunk = chunk
-        .min(gpu.limits.max_texture_array_layers as usize / sensor.samples)
         .min(gpu.limits.max_compute_workgroups_per_dimension as usize)
         .min(256);
     // keep the per-chunk device memory modest (tri ids + depth + outputs, plus the
     // transmitter's tri ids + depth when bistatic)
-    let tx_w = transmitter_map_width(w, gpu.info.max_texture_dimension_2d as usize);
+    let tx_w = transmitter_map_width(w, max_dim);
     let shadow_maps = if sensor.bistatic_angle > 0.0 {
         (tx_w * tx_w * 8) as u64
     } else {
@@ -970,28 +1136,32 @@ fn render_chunks(
         contents: bytemuck::bytes_of(params),
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let vis_uni = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("visibility params"),
-        contents: bytemuck::bytes_of(&VisParams {
-            ext: lay.ext as f32,
-            ext_z: (lay.ext * 1.001) as f32,
-            _pad: [0.0; 2],
-        }),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    // the receiver's raster transforms: attitude l, sample k at instance l K + k, the
-    // sample moved onto the pixel centre (shaders/visibility.wgsl)
-    let shifts: Vec<[f32; 4]> = sample_offsets(n_s)
-        .iter()
-        .map(|o| {
-            [
-                ((0.5 - o[0]) * lay.pix) as f32,
-                ((o[1] - 0.5) * lay.pix) as f32,
-                0.0,
-                0.0,
-            ]
+    let msaa = n_s >= MSAA;
+    let vis_uni = |ext: f64| {
+        dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("visibility params"),
+            contents: bytemuck::bytes_of(&VisParams {
+                ext: ext as f32,
+                ext_z: (lay.ext * 1.001) as f32,
+                _pad: [0.0; 2],
+            }),
+            usage: wgpu::BufferUsages::UNIFORM,
         })
+    };
+    let vis_uni_image = vis_uni(lay.ext);
+    // a tile is the image with a one-texel margin (MsaaTiles)
+    let vis_uni_rcv = if msaa {
+        vis_uni(lay.ext * (w + 2) as f64 / w as f64)
+    } else {
+        vis_uni(lay.ext)
+    };
+    // the receiver's raster transforms: attitude l, pass p at instance l P + p, its
+    // samples moved to where the rasterizer samples (shaders/visibility.wgsl)
+    let shifts: Vec<[f32; 4]> = raster_displacements(n_s)
+        .iter()
+        .map(|d| [(d[0] * lay.pix) as f32, (-d[1] * lay.pix) as f32, 0.0, 0.0])
         .collect();
+    let n_pass = shifts.len();
     let affine = |r: &Rot, t: [f32; 4]| -> [f32; 16] {
         let mut a = [0.0f32; 16];
         a[..12].copy_from_slice(&gpu_rotation(r));
@@ -1037,7 +1207,57 @@ fn render_chunks(
         .profile
         .then(|| mk("profile read", prof_size, read_usage));
     let tot_read = mk("total read", tot_size, read_usage);
-    let rcv = IdTarget::new(dev, "visibility target", w as u32, (c * n_s) as u32);
+    let (rcv, tiles) = if msaa {
+        let max_dim = gpu.info.max_texture_dimension_2d as usize;
+        (None, Some(MsaaTiles::new(dev, w + 2, n_pass, max_dim)))
+    } else {
+        let t = IdTarget::new(dev, "visibility target", w as u32, (c * n_s) as u32);
+        (Some(t), None)
+    };
+    // K >= 4: the gathered sample ids, and per attitude of a chunk its gather parameters
+    // (one uniform block each, bound at a dynamic offset)
+    let ids_buf = tiles.as_ref().map(|t| {
+        mk(
+            "sample ids",
+            (c * n_pass * t.side * t.side * MSAA * 4) as u64,
+            wgpu::BufferUsages::STORAGE,
+        )
+    });
+    let stride = gpu.limits.min_uniform_buffer_offset_alignment.max(16) as usize;
+    let gather_bg = tiles.as_ref().zip(ids_buf.as_ref()).map(|(t, ids)| {
+        let mut words = vec![0u32; c * stride / 4];
+        for l in 0..c {
+            words[l * stride / 4..][..4]
+                .copy_from_slice(&[l as u32, t.side as u32, t.cols as u32, n_pass as u32]);
+        }
+        let uni = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("gather params"),
+            contents: bytemuck::cast_slice(&words),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gather"),
+            layout: &gpu.gather_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&t.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: ids.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &uni,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(16),
+                    }),
+                },
+            ],
+        })
+    });
     // bistatic: the triangle ids seen from the transmitter (same square, tx_width texels)
     let tx = key
         .shadows
@@ -1062,7 +1282,7 @@ fn render_chunks(
             contents: bytemuck::cast_slice(&rots),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let vis_group = |rot: &wgpu::Buffer| {
+        let vis_group = |rot: &wgpu::Buffer, uni: &wgpu::Buffer| {
             dev.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("visibility"),
                 layout: &gpu.vis_layout,
@@ -1077,7 +1297,7 @@ fn render_chunks(
                     },
                     wgpu::BindGroupEntry {
                         binding: 2,
-                        resource: vis_uni.as_entire_binding(),
+                        resource: uni.as_entire_binding(),
                     },
                 ],
             })
@@ -1091,7 +1311,7 @@ fn render_chunks(
             contents: bytemuck::cast_slice(&tfs),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let vis_bg = vis_group(&tf_buf);
+        let vis_bg = vis_group(&tf_buf, &vis_uni_rcv);
         // bistatic: R_tx = R_y(-beta) R, computed in f64 (wi -> +z)
         let tx_bg = key.shadows.then(|| {
             let rots: Vec<[f32; 16]> = rotations[start..start + m]
@@ -1103,7 +1323,7 @@ fn render_chunks(
                 contents: bytemuck::cast_slice(&rots),
                 usage: wgpu::BufferUsages::STORAGE,
             });
-            vis_group(&buf)
+            vis_group(&buf, &vis_uni_image)
         });
         let shade_bg = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shade"),
@@ -1111,7 +1331,9 @@ fn render_chunks(
             entries: &[
                 wgpu::BindGroupEntry {
                     binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&rcv.array_view),
+                    resource: wgpu::BindingResource::TextureView(
+                        rcv.as_ref().map_or(&gpu.dummy_ids, |t| &t.array_view),
+                    ),
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
@@ -1148,8 +1370,17 @@ fn render_chunks(
                 wgpu::BindGroupEntry {
                     binding: 9,
                     resource: wgpu::BindingResource::TextureView(
-                        tx.as_ref().map_or(&rcv.array_view, |t| &t.array_view),
+                        tx.as_ref()
+                            .or(rcv.as_ref())
+                            .map_or(&gpu.dummy_ids, |t| &t.array_view),
                     ),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 10,
+                    resource: ids_buf
+                        .as_ref()
+                        .unwrap_or(&gpu.dummy_buffer)
+                        .as_entire_binding(),
                 },
             ],
         });
@@ -1160,9 +1391,58 @@ fn render_chunks(
         enc.clear_buffer(&tot_buf, 0, None);
         // the receiver's view, then (bistatic) the transmitter's
         // (layer l K + k holds attitude l's sample k, drawn as instance l K + k)
-        let mut views_and_groups = vec![(&rcv.id_views, &rcv.depth_views, &vis_bg, n_s)];
+        let mut views_and_groups = vec![];
+        if let Some(t) = &rcv {
+            views_and_groups.push((&t.id_views, &t.depth_views, &vis_bg, n_s));
+        }
         if let (Some(bg), Some(t)) = (&tx_bg, &tx) {
             views_and_groups.push((&t.id_views, &t.depth_views, bg, 1));
+        }
+        if let (Some(t), Some(gbg)) = (&tiles, &gather_bg) {
+            // per attitude: its K / MSAA passes into the tiles, then their samples gathered
+            // into its slot of the id buffer (the same tiles for every attitude, so the
+            // rasterization does not depend on the attitude's place in the batch)
+            let side = t.side as u32;
+            for l in 0..m {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("visibility tiles"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &t.view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &t.depth_view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(&gpu.vis_pipeline_msaa[mesh_closed as usize]);
+                pass.set_bind_group(0, &vis_bg, &[]);
+                for p in 0..n_pass {
+                    let (x, y) = t.origin(p);
+                    pass.set_viewport(x as f32, y as f32, side as f32, side as f32, 0.0, 1.0);
+                    pass.set_scissor_rect(x as u32, y as u32, side, side);
+                    let i = (l * n_pass + p) as u32;
+                    pass.draw(0..(3 * params.n_tri), i..i + 1);
+                }
+                drop(pass);
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&gpu.gather_pipeline);
+                pass.set_bind_group(0, gbg, &[(l * stride) as u32]);
+                let g = side.div_ceil(8);
+                pass.dispatch_workgroups(g, g, n_pass as u32);
+            }
         }
         for (views, dviews, bg, k_s) in views_and_groups {
             for l in 0..m * k_s {
@@ -1393,6 +1673,68 @@ impl IdTarget {
             id_views: layer_views(&ids),
             depth_views: layer_views(&depth),
         }
+    }
+}
+
+/// The receiver's raster target with `K >= 4` visibility samples: one multisampled
+/// ([`MSAA`]) R32Float texture of `passes` square tiles, `side` texels a side, `cols` to a
+/// row, pass `p` in tile `p`. A tile is the image with a margin of one texel on every side
+/// (pixel `(c, r)` is its texel `(c + 1, r + 1)`), where samples wrapped out of a border
+/// pixel are drawn. Ids are stored as `f32` (exact below `2^24` triangles; R32Float is
+/// multisampled in core WebGPU, R32Uint is not) and gathered per attitude into a u32 buffer
+/// by `shaders/gather.wgsl`.
+struct MsaaTiles {
+    view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    side: usize,
+    cols: usize,
+}
+
+impl MsaaTiles {
+    /// Columns and rows of `passes` tiles of `side` texels within `max_dim` texels.
+    fn grid(side: usize, passes: usize, max_dim: usize) -> Option<(usize, usize)> {
+        let cols = (max_dim / side).min(passes);
+        (cols > 0 && passes.div_ceil(cols) * side <= max_dim)
+            .then(|| (cols, passes.div_ceil(cols)))
+    }
+
+    fn new(dev: &wgpu::Device, side: usize, passes: usize, max_dim: usize) -> Self {
+        let (cols, rows) = Self::grid(side, passes, max_dim).expect("checked by render()");
+        let texture = |format, usage| {
+            dev.create_texture(&wgpu::TextureDescriptor {
+                label: Some("visibility tiles"),
+                size: wgpu::Extent3d {
+                    width: (cols * side) as u32,
+                    height: (rows * side) as u32,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: MSAA as u32,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let ids = texture(
+            wgpu::TextureFormat::R32Float,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let depth = texture(
+            wgpu::TextureFormat::Depth32Float,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        MsaaTiles {
+            view: ids.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            side,
+            cols,
+        }
+    }
+
+    /// Top-left texel of tile `p`.
+    fn origin(&self, p: usize) -> (usize, usize) {
+        ((p % self.cols) * self.side, (p / self.cols) * self.side)
     }
 }
 
@@ -1948,29 +2290,56 @@ mod sample_tests {
     use super::*;
     use crate::render::twin;
 
-    /// The samples form a (0, m, 2)-net: every elementary box of area 1/K holds exactly one
-    /// (so each row and column of the K x K grid holds one), and their mean is the centre.
+    /// The samples form a (0, m, 2)-net (K = 8: n-rooks and two per quadrant): every
+    /// elementary box of area 1/K holds exactly one (so each row and column of the K x K
+    /// grid holds one); the set is symmetric under a half turn about the centre; and with
+    /// K >= 4 sample `k` is where the multisampled raster puts it: the standard position
+    /// of its sample index, moved by its pass's shift, in the texel it is read from.
     #[test]
     fn sample_offsets_form_a_net() {
         assert_eq!(sample_offsets(1), vec![[0.5, 0.5]]);
         for k in [2usize, 4, 8, 16] {
             let s = sample_offsets(k);
             let m = k.trailing_zeros();
-            for i in 0..=m {
-                let (nx, ny) = (1usize << i, 1usize << (m - i));
+            let count = |nx: usize, ny: usize| {
                 let mut count = vec![0; nx * ny];
                 for p in &s {
                     assert!((0.0..1.0).contains(&p[0]) && (0.0..1.0).contains(&p[1]));
                     let (a, b) = ((p[0] * nx as f64) as usize, (p[1] * ny as f64) as usize);
                     count[a * ny + b] += 1;
                 }
-                assert!(
-                    count.iter().all(|&c| c == 1),
-                    "k {k}: {nx} x {ny} boxes {count:?}"
-                );
+                count
+            };
+            for i in 0..=m {
+                let (nx, ny) = (1usize << i, 1usize << (m - i));
+                if k == 8 && i != 0 && i != m {
+                    continue;
+                }
+                let c = count(nx, ny);
+                assert!(c.iter().all(|&c| c == 1), "k {k}: {nx} x {ny} boxes {c:?}");
             }
-            let mean = s.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0], a[1] + p[1]]);
-            assert_eq!(mean, [0.5 * k as f64, 0.5 * k as f64]);
+            if k == 8 {
+                assert_eq!(count(2, 2), vec![2; 4]);
+            }
+            for p in &s {
+                let q = [1.0 - p[0], 1.0 - p[1]];
+                assert!(s.contains(&q), "k {k}: {p:?} without its mirror image");
+            }
+        }
+        for k in [4usize, 8, 16] {
+            let d = raster_displacements(k);
+            assert_eq!(d.len(), k / MSAA);
+            for (i, o) in msaa_samples(k).iter().enumerate() {
+                assert_eq!((o.pass, o.sample), (i / MSAA, i % MSAA));
+                // the raster sample s of texel t sees t + position_s - displacement_p,
+                // which must be the pixel's point for t = the pixel's + texel
+                let pos = MSAA_POSITIONS[o.sample];
+                for a in 0..2 {
+                    let seen = o.texel[a] as f64 + pos[a] as f64 / 16.0 - d[o.pass][a];
+                    assert!((seen - o.uv[a]).abs() < 1e-12, "k {k} sample {i}: {seen} {o:?}");
+                }
+                assert!(o.texel.iter().all(|t| t.abs() <= 1));
+            }
         }
     }
 

@@ -20,7 +20,9 @@
 //! Row 0 is the top (`Y = +ext`), column 0 the left (`X = -ext`); pixel `(i, j)` has its
 //! centre at `X = -ext + (j + 1/2) delta`, `Y = ext - (i + 1/2) delta`, `delta = 2 ext / W`.
 //! Visibility is sampled (rasterization) at `K` points of each pixel (`samples`, a power
-//! of two up to 16; [`gpu::sample_offsets`]: a (0, m, 2)-net, `K = 1` the centre). Each
+//! of two up to 16; [`gpu::sample_offsets`]: one per row and column of the `K x K` grid,
+//! symmetric about the centre, `K = 1` the centre; `K >= 4` the standard 4x multisample
+//! positions in `K / 4` shifted passes, [`gpu::msaa_samples`]). Each
 //! flat surface ([`geometry::Mesh::surfaces`]: faces joined by edges, coplanar, of one
 //! material, flat-shaded; each face of a smooth-shaded mesh is its own) seen by `c` of them
 //! counts for `c / K` of the pixel's area and is shaded once, on the plane of the triangle
@@ -94,6 +96,7 @@ pub mod shaders {
     pub const VISIBILITY: &str = include_str!("../../shaders/visibility.wgsl");
     pub const SHADE: &str = include_str!("../../shaders/shade.wgsl");
     pub const PULSE: &str = include_str!("../../shaders/pulse.wgsl");
+    pub const GATHER: &str = include_str!("../../shaders/gather.wgsl");
 
     /// The complete shade module (pulse functions + kernel).
     pub fn shade_module() -> String {
@@ -216,6 +219,7 @@ mod tests {
     fn shaders_validate_with_naga() {
         validate("visibility.wgsl", shaders::VISIBILITY);
         validate("pulse.wgsl", shaders::PULSE);
+        validate("gather.wgsl", shaders::GATHER);
         let m = validate("shade (pulse + shade)", &shaders::shade_module());
         // the uniform block's size matches the Rust struct
         let params = m
