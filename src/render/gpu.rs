@@ -520,9 +520,10 @@ const MSAA_POSITIONS: [[i32; 2]; MSAA] = [[6, 2], [14, 6], [2, 10], [10, 14]]; /
 /// `k = 8, 16` (`k = 4`: one pass, none), found by exhaustive search over odd shifts: the
 /// `k` (wrapped) positions are symmetric under a half turn about the pixel centre (so a
 /// render is invariant under a half turn about the line of sight, as the scene is) and
-/// form a (0, m, 2)-net. For `k = 8` no symmetric net exists among these; the shifts
-/// `-+1/16` keep n-rooks and two samples per quadrant.
-const MSAA_SHIFTS_8: [[i32; 2]; 2] = [[-1, -1], [1, 1]];
+/// form a (0, m, 2)-net. For `k = 8` no symmetric net exists among these; of the
+/// symmetric ones with one sample per row and column and two per quadrant, these shifts put
+/// two samples in the fewest of the 16 `2 x 4` and `4 x 2` boxes (4), then wrap the fewest.
+const MSAA_SHIFTS_8: [[i32; 2]; 2] = [[-3, -1], [3, 1]];
 const MSAA_SHIFTS_16: [[i32; 2]; 4] = [[-13, -7], [-1, 5], [1, -5], [13, 7]];
 
 /// Where visibility sample `k` of a pixel comes from with `K >= 4`.
@@ -2320,6 +2321,11 @@ mod sample_tests {
             }
             if k == 8 {
                 assert_eq!(count(2, 2), vec![2; 4]);
+                let doubled: usize = [(2, 4), (4, 2)]
+                    .iter()
+                    .map(|&(nx, ny)| count(nx, ny).iter().filter(|&&c| c == 2).count())
+                    .sum();
+                assert_eq!(doubled, 4);
             }
             for p in &s {
                 let q = [1.0 - p[0], 1.0 - p[1]];
