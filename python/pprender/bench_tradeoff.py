@@ -241,8 +241,9 @@ def main(argv: list[str] | None = None) -> str:
         "16 points per pixel (the reference at 16): silhouettes, panel edges and features "
         "thinner than a pixel (the CubeSat's whip antenna) are then area-weighted, and the "
         "CubeSat's total is within 1e-3 at `balanced` where the centre sample is off by 10% at "
-        "`fast`. On lavapipe each visibility sample is one more raster pass, which is most of "
-        "`balanced`'s and `accurate`'s time here.", "",
+        "`fast`. On lavapipe the samples cost raster passes (one 4x multisampled pass per 4 "
+        "samples) and a shading per flat surface that a pixel's samples see: the smooth-shaded "
+        "sphere, each face its own surface, pays the most for them.", "",
         "## Every scene", "", HEADER, *[_line(r) for r in rows], "",
     ])
     print()

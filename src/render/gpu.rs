@@ -1,7 +1,9 @@
 //! The wgpu side of the renderer: adapter choice, pipelines, chunked batch rendering.
 //!
-//! Per chunk of attitudes: one render pass per attitude rasterizes triangle indices into a
-//! layer of an R32Uint texture array (`shaders/visibility.wgsl`), then one compute dispatch
+//! Per chunk of attitudes: one render pass per attitude and visibility sample rasterizes
+//! triangle indices into a layer of an R32Uint texture array (`shaders/visibility.wgsl`;
+//! with `K >= 4` samples, one 4x multisampled render pass per attitude into fixed tiles,
+//! gathered by `shaders/gather.wgsl` into a buffer: [`MsaaTiles`]), then one compute dispatch
 //! (`shaders/shade.wgsl`, specialized by override constants to the requested outputs)
 //! shades every pixel and accumulates the profile and total in 64-bit fixed point. Only the
 //! requested buffers are created and read back. Bistatic (`beta > 0`) the same raster
