@@ -1153,11 +1153,8 @@ fn render_chunks(
     };
     let vis_uni_image = vis_uni(lay.ext);
     // a tile is the image with a one-texel margin (MsaaTiles)
-    let vis_uni_rcv = if msaa {
-        vis_uni(lay.ext * (w + 2) as f64 / w as f64)
-    } else {
-        vis_uni(lay.ext)
-    };
+    let vis_uni_tiles = msaa.then(|| vis_uni(lay.ext * (w + 2) as f64 / w as f64));
+    let vis_uni_rcv = vis_uni_tiles.as_ref().unwrap_or(&vis_uni_image);
     // the receiver's raster transforms: attitude l, pass p at instance l P + p, its
     // samples moved to where the rasterizer samples (shaders/visibility.wgsl)
     let shifts: Vec<[f32; 4]> = raster_displacements(n_s)
@@ -1314,7 +1311,7 @@ fn render_chunks(
             contents: bytemuck::cast_slice(&tfs),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let vis_bg = vis_group(&tf_buf, &vis_uni_rcv);
+        let vis_bg = vis_group(&tf_buf, vis_uni_rcv);
         // bistatic: R_tx = R_y(-beta) R, computed in f64 (wi -> +z)
         let tx_bg = key.shadows.then(|| {
             let rots: Vec<[f32; 16]> = rotations[start..start + m]
@@ -1407,29 +1404,7 @@ fn render_chunks(
             // rasterization does not depend on the attitude's place in the batch)
             let side = t.side as u32;
             for l in 0..m {
-                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("visibility tiles"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &t.view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &t.depth_view,
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(1.0),
-                            store: wgpu::StoreOp::Discard,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
+                let mut pass = id_pass(&mut enc, "visibility tiles", &t.view, &t.depth_view);
                 pass.set_pipeline(&gpu.vis_pipeline_msaa[mesh_closed as usize]);
                 pass.set_bind_group(0, &vis_bg, &[]);
                 for p in 0..n_pass {
@@ -1449,29 +1424,7 @@ fn render_chunks(
         }
         for (views, dviews, bg, k_s) in views_and_groups {
             for l in 0..m * k_s {
-                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("visibility"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &views[l],
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &dviews[l],
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(1.0),
-                            store: wgpu::StoreOp::Discard,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
+                let mut pass = id_pass(&mut enc, "visibility", &views[l], &dviews[l]);
                 pass.set_pipeline(&gpu.vis_pipeline[mesh_closed as usize]);
                 pass.set_bind_group(0, bg, &[]);
                 let l = l as u32;
@@ -1621,6 +1574,71 @@ fn render_chunks(
     })
 }
 
+/// A raster target of triangle ids (`format`, read by a kernel) and its Depth32Float buffer,
+/// `samples` per texel.
+fn id_textures(
+    dev: &wgpu::Device,
+    label: &str,
+    size: wgpu::Extent3d,
+    samples: u32,
+    format: wgpu::TextureFormat,
+) -> (wgpu::Texture, wgpu::Texture) {
+    let texture = |format, usage| {
+        dev.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size,
+            mip_level_count: 1,
+            sample_count: samples,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let ids = texture(
+        format,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+    );
+    let depth = texture(
+        wgpu::TextureFormat::Depth32Float,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    (ids, depth)
+}
+
+/// A visibility render pass into an id target (cleared to 0) and its depth buffer (cleared
+/// to the far plane, not stored).
+fn id_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    ids: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: ids,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Discard,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
 /// A raster target of triangle ids (R32Uint, read by the shade kernel) with its depth
 /// buffer, `layers` attitudes deep: per-layer views for the raster passes, an array view
 /// for the kernel.
@@ -1632,30 +1650,12 @@ struct IdTarget {
 
 impl IdTarget {
     fn new(dev: &wgpu::Device, label: &str, side: u32, layers: u32) -> Self {
-        let texture = |format, usage| {
-            dev.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width: side,
-                    height: side,
-                    depth_or_array_layers: layers,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
+        let size = wgpu::Extent3d {
+            width: side,
+            height: side,
+            depth_or_array_layers: layers,
         };
-        let ids = texture(
-            wgpu::TextureFormat::R32Uint,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        );
-        let depth = texture(
-            wgpu::TextureFormat::Depth32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
+        let (ids, depth) = id_textures(dev, label, size, 1, wgpu::TextureFormat::R32Uint);
         let layer_views = |t: &wgpu::Texture| -> Vec<wgpu::TextureView> {
             (0..layers)
                 .map(|l| {
@@ -1703,29 +1703,17 @@ impl MsaaTiles {
 
     fn new(dev: &wgpu::Device, side: usize, passes: usize, max_dim: usize) -> Self {
         let (cols, rows) = Self::grid(side, passes, max_dim).expect("checked by render()");
-        let texture = |format, usage| {
-            dev.create_texture(&wgpu::TextureDescriptor {
-                label: Some("visibility tiles"),
-                size: wgpu::Extent3d {
-                    width: (cols * side) as u32,
-                    height: (rows * side) as u32,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: MSAA as u32,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
+        let size = wgpu::Extent3d {
+            width: (cols * side) as u32,
+            height: (rows * side) as u32,
+            depth_or_array_layers: 1,
         };
-        let ids = texture(
+        let (ids, depth) = id_textures(
+            dev,
+            "visibility tiles",
+            size,
+            MSAA as u32,
             wgpu::TextureFormat::R32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        );
-        let depth = texture(
-            wgpu::TextureFormat::Depth32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         MsaaTiles {
             view: ids.create_view(&Default::default()),
