@@ -77,6 +77,48 @@ def test_reference_supersampling_and_stokes():
                                atol=1e-9 * r.cross_section[0, 0])
 
 
+def test_f64_arithmetic_is_the_kernel_in_double_precision():
+    """``arithmetic="f64"`` runs the kernel's f64 CPU twin on the same tables: against the
+    exact reference (core BRDFs, same ray-cast visibility) only the tables differ; against
+    the f32 kernel only the arithmetic (and rasterizer ties, excluded by coverage)."""
+    scene = _sphere_scene()
+    q = np.array([[0.9, 0.3, -0.2, 0.25]])
+    q /= np.linalg.norm(q)
+    out = ("mueller", "profile", "range")
+    r = {a: pprender.render(scene, pprender.Lidar(resolution=48, pixel_samples=1, arithmetic=a), q, outputs=out)
+         for a in ("f32", "f64")}
+    ref = pprender.render(scene, pprender.Lidar(resolution=48, pixel_samples=1, quality="reference"), q, outputs=out)
+    assert r["f64"].device.startswith("f64 twin") and not r["f32"].device.startswith("f64")
+    assert pprender.Lidar(arithmetic="f64").effective_arithmetic() == "f64"
+    assert pprender.Lidar(quality="reference").effective_arithmetic() == "f64"
+    assert pprender.Lidar().effective_arithmetic() == "f32"
+    # the twin and the reference cast the same rays: identical pixels and ranges
+    np.testing.assert_array_equal(r["f64"].coverage, ref.coverage)
+    np.testing.assert_array_equal(r["f64"].range, ref.range)
+    # tables against the core, both in f64: the tables' interpolation error (1e-4 of M00 at
+    # this roughness, docs/render-table.md) on pixels above 1% of the peak
+    e_table = _rel_image_error(r["f64"].mueller, ref.mueller, 1e-2)
+    # f32 against f64 on the same tables, pixels both see alike: f32 rounding (3.5e-5 in
+    # the Rust kernel-vs-twin test) and the shading point's f32 position
+    same = (r["f32"].coverage == r["f64"].coverage)[..., None, None]
+    e_f32 = _rel_image_error(np.where(same, r["f32"].mueller, r["f64"].mueller), r["f64"].mueller, 1e-2)
+    print(f"tables vs core {e_table:.2e}, f32 vs f64 {e_f32:.2e}")
+    assert 1e-7 < e_table < 2e-4, e_table  # the tables are not the core, and close to it
+    assert e_f32 < 2e-4, e_f32
+    assert same.mean() > 0.99
+    for a in ("f32", "f64"):
+        np.testing.assert_allclose(r[a].profile.sum(axis=1), r[a].cross_section, rtol=0,
+                                   atol=1e-6 * r[a].cross_section[0, 0, 0])
+    # Stokes, intensity-only and supersampled requests go through the twin alike
+    kw = {"resolution": 16, "supersampling": 2, "pixel_samples": 4, "arithmetic": "f64"}
+    m = pprender.render(scene, pprender.Lidar(**kw), q, outputs=("mueller", "profile"))
+    i = pprender.render(scene, pprender.Lidar(polarization=[1, 0, 0, 0], intensity_only=True, **kw), q,
+                        outputs=("intensity", "profile"))
+    assert i.intensity.shape == (1, 16, 16) and i.profile.shape == m.profile.shape[:2]
+    np.testing.assert_allclose(i.intensity, m.mueller[..., 0, 0], rtol=1e-6, atol=0)
+    np.testing.assert_allclose(i.profile, m.profile[..., 0, 0], rtol=1e-12, atol=0)
+
+
 def test_table_overrides_change_the_tables_and_resolution_follows_the_preset():
     s = pprender.Lidar(quality="fast", table={"n_z": 512})
     assert s.table_options()["n_z"] == 512 and s.table_options()["double_order"] == 32
@@ -109,6 +151,9 @@ def test_table_overrides_change_the_tables_and_resolution_follows_the_preset():
         ({"pixel_samples": 0}, "pixel_samples"),
         ({"pixel_samples": 4.0}, "pixel_samples"),
         ({"pixel_samples": True}, "pixel_samples"),
+        ({"arithmetic": "f16"}, "arithmetic"),
+        ({"arithmetic": 64}, "arithmetic"),
+        ({"quality": "reference", "arithmetic": "f32"}, "arithmetic"),
     ],
 )
 def test_bad_quality_settings(kwargs, name):

@@ -218,6 +218,13 @@ class Lidar:
     ``n_psi`` (single term), ``n_z_lambertian``, ``n_psi_lambertian`` (multiple + diffuse),
     ``n_z_double``, ``n_psi_double``, ``double_order`` (:func:`pprender.brdf_table`).
     ``resolution`` and ``pixel_samples`` given explicitly override the preset's.
+    ``arithmetic``: ``"f32"`` (the device kernel, default) or ``"f64"``: the kernel's f64
+    CPU twin, the same tables, visibility samples and pulse integration in double precision
+    (with rayon, on the CPU whatever ``device``; bistatic cast shadows by exact rays instead
+    of the kernel's shadow map). It isolates what f32 arithmetic costs in accuracy: about
+    3e-5 of a pixel's M00, half the tables' own interpolation error (docs/tradeoff.md
+    measures both), so ``"f32"`` is the choice unless that is to be shown. ``quality=
+    "reference"`` is f64 already (``arithmetic`` unset or ``"f64"``).
     ``intensity_only``: with a ``polarization``, compute only the received intensity ``S0``
     (``"intensity"`` images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel
     then looks up only the Mueller elements it needs (``M00`` alone for an unpolarized
@@ -241,8 +248,15 @@ class Lidar:
     quality: str = "balanced"
     table: Any = None
     intensity_only: bool = False
+    arithmetic: str | None = None
 
     def __post_init__(self) -> None:
+        if self.arithmetic not in (None, "f32", "f64"):
+            raise Error(f'invalid arithmetic = {self.arithmetic!r}: "f32" (the device kernel) or "f64" '
+                        "(its CPU twin in double precision)")
+        if self.quality == "reference" and self.arithmetic == "f32":
+            raise Error('invalid arithmetic = "f32" with quality = "reference": the reference is the '
+                        'exact f64 renderer (leave arithmetic unset)')
         if not isinstance(self.intensity_only, (bool, np.bool_)):
             raise Error(f"invalid intensity_only = {self.intensity_only!r}: True or False")
         if self.intensity_only and self.polarization is None:
@@ -378,6 +392,12 @@ class Lidar:
         if self.pixel_samples is not None:
             return int(self.pixel_samples)
         return int(QUALITY[self.quality]["pixel_samples"])
+
+    def effective_arithmetic(self) -> str:
+        """``"f64"`` for the twin or the reference, else ``"f32"`` (the device kernel)."""
+        if self.quality == "reference":
+            return "f64"
+        return self.arithmetic or "f32"
 
     def table_options(self) -> dict[str, int]:
         """The BRDF table grid the renderer uses: the preset's, then ``table``'s overrides
@@ -538,7 +558,7 @@ def render(
         image=("mueller" in outputs or "stokes" in outputs or "intensity" in outputs),
         range="range" in outputs,
         profile="profile" in outputs,
-        device="reference" if reference else device,
+        device="reference" if reference else ("twin" if sensor.effective_arithmetic() == "f64" else device),
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
         analytic=sensor.coverage == "analytic",

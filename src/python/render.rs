@@ -171,7 +171,8 @@ impl PyRenderScene {
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
     /// `device = "reference"`: the f64 CPU reference (`twin::render_reference`, exact
-    /// BRDFs, no tables; the table keywords are then unused).
+    /// BRDFs, no tables; the table keywords are then unused). `device = "twin"`: the
+    /// kernel's f64 CPU twin with the same tables (`twin::render_tables`).
     #[pyo3(signature = (rotations, *, resolution, supersampling, samples, bistatic_angle, polarization,
         intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
@@ -234,7 +235,8 @@ impl PyRenderScene {
             .collect();
         check_rotations(&rots)?;
         let reference = device == "reference";
-        let choice = if reference {
+        let f64_twin = device == "twin";
+        let choice = if reference || f64_twin {
             DeviceChoice::parse("auto")?
         } else {
             DeviceChoice::parse(device)?
@@ -270,6 +272,11 @@ impl PyRenderScene {
                     &self.tables.materials,
                 );
                 return Ok((r, "reference (f64 CPU, exact BRDFs)".to_string()));
+            }
+            if f64_twin {
+                let (_, tables, _) = self.tables.get_with_tables(bistatic_angle, &opts)?;
+                let r = crate::render::twin::render_tables(&mesh, &sensor, &rots, outputs, &tables);
+                return Ok((r, "f64 twin (CPU, BRDF tables)".to_string()));
             }
             let (tables, _) = self.tables.get_with(bistatic_angle, &opts)?;
             let g = gpu::context(choice)?;

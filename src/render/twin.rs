@@ -752,7 +752,34 @@ pub fn render_reference(
     materials: &[std::sync::Arc<crate::brdf::Material>],
 ) -> Rendered {
     let brdf = |m: usize, wi: V3, wo: V3| crate::brdf::eval(&materials[m], wi, wo, Frame::Sp);
-    let mut r = render_cpu(mesh, sensor, rotations, outputs, &brdf);
+    render_supersampled(mesh, sensor, rotations, outputs, &brdf)
+}
+
+/// The kernel's algorithm in f64 on the CPU with the GPU's BRDF tables (their f64
+/// originals, [`crate::brdf::table::BrdfTable::eval_dirs`]): what `Lidar(arithmetic="f64")`
+/// runs. Against `gpu::render` with the same tables only the arithmetic differs (and, when
+/// bistatic, the cast-shadow test: exact rays here, the kernel's shadow map there).
+pub fn render_tables(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    tables: &[crate::brdf::table::BrdfTable],
+) -> Rendered {
+    let brdf = |m: usize, wi: V3, wo: V3| tables[m].eval_dirs(wi, wo);
+    render_supersampled(mesh, sensor, rotations, outputs, &brdf)
+}
+
+/// [`render_cpu`] at `sensor.supersampling` sub-pixels per pixel side, the images summed
+/// and the range averaged over covered sub-pixels to the sensor's pixels (as `gpu::render`).
+pub fn render_supersampled(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &BrdfFn<'_>,
+) -> Rendered {
+    let mut r = render_cpu(mesh, sensor, rotations, outputs, brdf);
     let ss = sensor.supersampling;
     if ss > 1 {
         let (w, res, n, ch) = (r.width, sensor.resolution, r.n, r.channels);
