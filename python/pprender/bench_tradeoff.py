@@ -247,12 +247,9 @@ def measure_knobs(quick: bool = False, batch: int = 8, repeats: int = 3, device:
 
     def run(group: str, sname: str, scene: pprender.Scene, ref: Any, f: int, knob: str, value: str,
             sensor: pprender.Lidar, rots: np.ndarray, setup: float = 0.0) -> None:
-        t0 = time.perf_counter()
         r = pprender.render(scene, sensor, rots, outputs=out, device=device)
-        first = time.perf_counter() - t0
         e = _errors(r, ref, f)
-        secs = _knob_time(scene, sensor, timing_rots, repeats, device) if sensor.quality != "reference" \
-            else first / len(rots)
+        secs = _knob_time(scene, sensor, timing_rots, repeats, device)
         res = sensor.effective_resolution(scene.radius)
         add(KnobRow(group, sname, knob, value, res, sensor.effective_pixel_samples() * sensor.supersampling ** 2,
                     secs, setup + r.table_seconds, e["img_rms00"], e["pixel_rel"], e["prof_l1"], e["total_rel"]))
