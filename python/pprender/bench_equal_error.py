@@ -20,7 +20,8 @@ Method
 * Error of an image: ``sqrt(mean((S0 - S0_ref)^2)) / mean(S0_ref)`` over the pixels covered
   in either (S0 in m^2 per pixel; Mitsuba's radiance times ``4 pi delta^2``).
 * pprender: the settings in ``SETTINGS`` (quality preset, visibility samples per pixel,
-  supersampling) at 128 x 128; time per realization in a batch of 32 attitudes (best of
+  supersampling, and the arithmetic: the f32 device kernel on lavapipe, or its f64 CPU
+  twin, ``arithmetic="f64"``, native with rayon on the same CPU) at 128 x 128; time per realization in a batch of 32 attitudes (best of
   ``repeats``) and for one attitude per call.
 * Mitsuba (``llvm_ad_mono_polarized``, ``stokes`` integrator over ``path`` with
   ``max_depth`` 2, directional emitter, ``independent`` sampler): its error measured at
@@ -49,15 +50,19 @@ import pprender
 
 RES = 128
 SS_REF = 8
-# (label, quality preset, visibility samples per pixel (None: the preset's), supersampling)
+# (label, quality preset, visibility samples per pixel (None: the preset's), supersampling,
+# arithmetic: "f32" the device kernel, "f64" its CPU twin on the same tables)
 SETTINGS = [
-    ("fast", "fast", None, 1),
-    ("fast, ss 2", "fast", None, 2),
-    ("fast, 4 samples", "fast", 4, 1),
-    ("balanced", "balanced", None, 1),
-    ("accurate", "accurate", None, 1),
-    ("accurate, ss 2", "accurate", None, 2),
-    ("accurate, ss 4", "accurate", None, 4),
+    ("fast", "fast", None, 1, "f32"),
+    ("fast, ss 2", "fast", None, 2, "f32"),
+    ("fast, 4 samples", "fast", 4, 1, "f32"),
+    ("balanced", "balanced", None, 1, "f32"),
+    ("accurate", "accurate", None, 1, "f32"),
+    ("accurate, ss 2", "accurate", None, 2, "f32"),
+    ("accurate, ss 4", "accurate", None, 4, "f32"),
+    ("fast, f64 CPU twin", "fast", None, 1, "f64"),
+    ("accurate, ss 2, f64 CPU twin", "accurate", None, 2, "f64"),
+    ("accurate, ss 4, f64 CPU twin", "accurate", None, 4, "f64"),
 ]
 MITSUBA_SPP = (4, 16, 64, 256, 1024)
 # the CubeSat's attitude: a rotation by 0.7 rad about (1, 2, 0.5) (generic: no face
@@ -128,9 +133,9 @@ def measure(repeats: int = 3, batch: int = 32, device: str = "auto") -> list[dic
         s0_ref = ref.mueller[0, ..., 0, 0].astype(np.float64)
         rows: list[dict[str, Any]] = []
         qb = np.repeat(q1, batch, axis=0)
-        for label, quality, samples, ss in SETTINGS:
+        for label, quality, samples, ss, arithmetic in SETTINGS:
             sensor = pprender.Lidar(quality=quality, resolution=RES, supersampling=ss, polarization=[1, 0, 0, 0],
-                                    pixel_samples=samples)
+                                    pixel_samples=samples, arithmetic=arithmetic)
             r = pprender.render(scene, sensor, q1, outputs=("stokes",), device=device)
             assert r.stokes is not None
             err = rms_error(r.stokes[0, ..., 0].astype(np.float64), s0_ref)

@@ -8,7 +8,8 @@ antenna; about 12k triangles) with an aluminium bus (Beckmann alpha 0.15, single
 multiple), glass-covered cells (alpha 0.05), white-painted panel backs and an aluminium
 antenna, monostatic at 1064 nm, 100 ps pulse, 128x128 pixels, one visibility sample per pixel
 (``pixel_samples=1``, the ``"fast"`` sampling; two rows show 4 and 8, the ``"balanced"``
-default, which rasterize once per sample) (and the same pulse as samples every
+default; two more the kernel's f64 CPU twin, ``arithmetic="f64"``, which runs natively with
+rayon instead of on the device) (and the same pulse as samples every
 5 ps, whose profile takes the sampled-pulse path: accumulated on the host in f64). A realization is one
 attitude. Rates are batch size / best wall time of ``--repeats`` calls of a batch of random
 attitudes; the one-off costs (device creation, shader compilation, material tables) are
@@ -186,6 +187,10 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
         ), ("profile",)),
         ("profile only, intensity of an unpolarized transmitter (M00 alone)", pprender.Lidar(
             resolution=RES, pixel_samples=1, polarization=[1, 0, 0, 0], intensity_only=True), ("profile",)),
+        ("profile only (Stokes), f64 CPU twin (`arithmetic=\"f64\"`, native, no device)", pprender.Lidar(
+            resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0], arithmetic="f64"), ("profile",)),
+        ("profile only (Stokes), 8 visibility samples per pixel, f64 CPU twin", pprender.Lidar(
+            resolution=RES, pixel_samples=8, polarization=[1, 1, 0, 0], arithmetic="f64"), ("profile",)),
     ]
     # what the model's terms cost: the same request with single-bounce-only materials
     single_only = cubesat_scene(terms=("single",))

@@ -636,10 +636,11 @@ pub fn render_cpu(
                 .collect();
             let beta = sensor.bistatic_angle;
             let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
-            let mut img = vec![0.0f32; w * w * ch];
-            let mut rng = vec![f32::NAN; w * w];
-            let mut cov = vec![0.0f32; w * w];
-            let mut prof = vec![0.0f64; nb * ch];
+            // only what is requested is kept (a profile-only batch holds no images)
+            let mut img = vec![0.0f32; if outputs.image { w * w * ch } else { 0 }];
+            let mut rng = vec![f32::NAN; if outputs.range { w * w } else { 0 }];
+            let mut cov = vec![0.0f32; if outputs.range { w * w } else { 0 }];
+            let mut prof = vec![0.0f64; if outputs.profile { nb * ch } else { 0 }];
             let mut tot = vec![0.0f64; ch];
             let mut weights = vec![0.0f64; nb];
             for k in 0..w * w {
@@ -701,12 +702,14 @@ pub fn render_cpu(
                         }
                     }
                 }
-                if cov_sum > 0.0 {
+                if cov_sum > 0.0 && outputs.range {
                     rng[k] = (r_sum / cov_sum) as f32;
                     cov[k] = cov_sum as f32;
                 }
                 for c in 0..ch {
-                    img[k * ch + c] = pixel[c] as f32;
+                    if outputs.image {
+                        img[k * ch + c] = pixel[c] as f32;
+                    }
                     tot[c] += pixel[c];
                 }
             }
@@ -714,7 +717,7 @@ pub fn render_cpu(
         })
         .collect();
     let n = rotations.len();
-    let cov: Vec<f32> = per.iter().flat_map(|p| p.4.clone()).collect();
+    let cov: Vec<f32> = per.iter().flat_map(|p| p.4.iter().copied()).collect();
     Rendered {
         n,
         height: w,
@@ -722,15 +725,15 @@ pub fn render_cpu(
         channels: ch,
         image: outputs
             .image
-            .then(|| per.iter().flat_map(|p| p.0.clone()).collect()),
+            .then(|| per.iter().flat_map(|p| p.0.iter().copied()).collect()),
         range: outputs
             .range
-            .then(|| per.iter().flat_map(|p| p.1.clone()).collect()),
+            .then(|| per.iter().flat_map(|p| p.1.iter().copied()).collect()),
         coverage: outputs.range.then_some(cov),
         profile: outputs
             .profile
-            .then(|| per.iter().flat_map(|p| p.2.clone()).collect()),
-        total: per.iter().flat_map(|p| p.3.clone()).collect(),
+            .then(|| per.iter().flat_map(|p| p.2.iter().copied()).collect()),
+        total: per.iter().flat_map(|p| p.3.iter().copied()).collect(),
         r_min: lay.r_min,
         bin_width: sensor.bin_width,
         n_bins: nb,
