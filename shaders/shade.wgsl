@@ -217,7 +217,10 @@ fn add_part(m: u32, p: u32, z: f32, psi: f32, w: f32, acc: ptr<function, array<f
             vals[e] = v;
         }
     }
-    let m00 = exp(max(vals[0], LN_FLOOR_F32)) * w;
+    // below LN_FLOOR_F32, exp leaves f32's normal range: zero, as the table's floor and
+    // the f64 twin make it (a floor value there would light covered pixels that return
+    // nothing with ~1e-38, where the twin gives 0)
+    let m00 = select(exp(vals[0]), 0.0, vals[0] < LN_FLOOR_F32) * w;
     (*acc)[0] += m00;
     for (var e = 1u; e < 16u; e++) {
         if (((ELEMENT_MASK >> e) & 1u) != 0u) {

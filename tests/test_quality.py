@@ -120,6 +120,27 @@ def test_f64_arithmetic_is_the_kernel_in_double_precision():
     np.testing.assert_allclose(i.profile, m.profile[..., 0, 0], rtol=1e-12, atol=0)
 
 
+def test_covered_pixels_that_return_nothing_are_zero_in_f32_as_in_f64():
+    """Near the limb of a glossy sphere ln M00 falls below f32's range (Beckmann alpha 0.2:
+    tan(theta)^2 / alpha^2 > 87 past 62 deg): where the f64 twin returns 0 the kernel must
+    too, not a floor value (it once returned exp(-87) x the pixel's weight, ~1e-42, which
+    counted as lit pixels in image metrics)."""
+    glossy = pprender.Material("beckmann", alpha=0.2, eta=1.38 + 10.2j, terms=["single"])
+    scene = _sphere_scene(glossy)
+    q = np.array([[1.0, 0, 0, 0]])
+    r = {a: pprender.render(scene, pprender.Lidar(resolution=48, pixel_samples=1, polarization=[1, 0, 0, 0],
+                                                  arithmetic=a), q, outputs=("stokes", "range"))
+         for a in ("f32", "f64")}
+    s0 = {a: r[a].stokes[0, ..., 0] for a in r}
+    np.testing.assert_array_equal(r["f32"].coverage, r["f64"].coverage)
+    dark = (r["f64"].coverage[0] > 0) & (s0["f64"] == 0)
+    assert dark.sum() > 50  # the limb: covered, returning nothing
+    np.testing.assert_array_equal(s0["f32"][dark], 0.0)
+    # and what is in f32's normal range in f64 is lit in f32 (between, ~1e-45 to 1e-38,
+    # the f64 value is a subnormal f32 that the kernel's arithmetic may flush to 0)
+    np.testing.assert_array_equal(s0["f32"][s0["f64"] > np.finfo(np.float32).tiny] > 0, True)
+
+
 def test_table_overrides_change_the_tables_and_resolution_follows_the_preset():
     s = pprender.Lidar(quality="fast", table={"n_z": 512})
     assert s.table_options()["n_z"] == 512 and s.table_options()["double_order"] == 32
