@@ -222,9 +222,11 @@ class Lidar:
     CPU twin, the same tables, visibility samples and pulse integration in double precision
     (with rayon, on the CPU whatever ``device``; bistatic cast shadows by exact rays instead
     of the kernel's shadow map). It isolates what f32 arithmetic costs in accuracy: about
-    3e-5 of a pixel's M00, half the tables' own interpolation error (docs/tradeoff.md
-    measures both), so ``"f32"`` is the choice unless that is to be shown. ``quality=
-    "reference"`` is f64 already (``arithmetic`` unset or ``"f64"``).
+    3e-5 of a pixel's M00, half the tables' own interpolation error, and 1e-6 to 1e-4 of
+    a profile, growing with the pixel's range footprint (docs/tradeoff.md measures both).
+    It is also a native CPU renderer: on a machine without a GPU it can be faster than
+    lavapipe (1.4x to 2x on 2 cores here, docs/render-benchmark.md); on a GPU ``"f32"`` is
+    the choice. ``quality="reference"`` is f64 already (``arithmetic`` unset or ``"f64"``).
     ``intensity_only``: with a ``polarization``, compute only the received intensity ``S0``
     (``"intensity"`` images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel
     then looks up only the Mueller elements it needs (``M00`` alone for an unpolarized
