@@ -309,7 +309,12 @@ pub struct Part {
 /// surface they see, in the order of their first sample; each group is shaded on the
 /// triangle its first sample sees, covers `c / K` of the pixel, is shaded at the mean of
 /// its points and spans their extent plus `1 / K` (twin of the K > 1 loop of `shade.wgsl`).
-pub fn sampled_parts(ids: &[Vec<u32>], offsets: &[[f64; 2]], surfaces: &[u32], pixel: usize) -> Vec<Part> {
+pub fn sampled_parts(
+    ids: &[Vec<u32>],
+    offsets: &[[f64; 2]],
+    surfaces: &[u32],
+    pixel: usize,
+) -> Vec<Part> {
     let n_s = offsets.len() as f64;
     // (id, count, sum u, sum v, [min u, max u, min v, max v])
     #[allow(clippy::type_complexity)]
@@ -320,12 +325,20 @@ pub fn sampled_parts(ids: &[Vec<u32>], offsets: &[[f64; 2]], surfaces: &[u32], p
             continue;
         }
         let surf = surfaces[id as usize - 1];
-        match groups.iter_mut().find(|g| surfaces[g.0 as usize - 1] == surf) {
+        match groups
+            .iter_mut()
+            .find(|g| surfaces[g.0 as usize - 1] == surf)
+        {
             Some(g) => {
                 g.1 += 1;
                 g.2 += uv[0];
                 g.3 += uv[1];
-                g.4 = [g.4[0].min(uv[0]), g.4[1].max(uv[0]), g.4[2].min(uv[1]), g.4[3].max(uv[1])];
+                g.4 = [
+                    g.4[0].min(uv[0]),
+                    g.4[1].max(uv[0]),
+                    g.4[2].min(uv[1]),
+                    g.4[3].max(uv[1]),
+                ];
             }
             None => groups.push((id, 1, uv[0], uv[1], [uv[0], uv[0], uv[1], uv[1]])),
         }
@@ -371,7 +384,10 @@ fn clip_edge(p: &Poly, a: [f64; 2], d: [f64; 2], s: f64) -> Poly {
         let fc = side(a, d, s, cur);
         if ((fc > 0.0 && fp < 0.0) || (fc < 0.0 && fp > 0.0)) && out.len() < CLIP_VERTS {
             let t = fp / (fp - fc);
-            out.push([prev[0] + t * (cur[0] - prev[0]), prev[1] + t * (cur[1] - prev[1])]);
+            out.push([
+                prev[0] + t * (cur[0] - prev[0]),
+                prev[1] + t * (cur[1] - prev[1]),
+            ]);
         }
         if fc >= 0.0 && out.len() < CLIP_VERTS {
             out.push(cur);
@@ -542,7 +558,10 @@ pub fn coverage_parts(
                 tri: t,
                 frac: vis[0],
                 centre: [vis[1] / vis[0], vis[2] / vis[0]],
-                span: [(hi[0] - lo[0]).clamp(0.0, 1.0), (hi[1] - lo[1]).clamp(0.0, 1.0)],
+                span: [
+                    (hi[0] - lo[0]).clamp(0.0, 1.0),
+                    (hi[1] - lo[1]).clamp(0.0, 1.0),
+                ],
             });
         }
     }
@@ -609,6 +628,39 @@ pub fn analytic_parts(
     })
 }
 
+/// Working memory of the CPU renderers (the twin and the reference) for attitudes
+/// rendered in parallel; fewer run at a time when theirs would exceed it.
+pub const CPU_MEMORY_BUDGET: usize = 4 << 30;
+
+/// Bytes one attitude of [`render_cpu`] holds at its peak: the K sample id maps, one depth
+/// map while they are drawn, and the requested per-pixel outputs and profile.
+pub fn attitude_bytes(
+    width: usize,
+    samples: usize,
+    channels: usize,
+    n_bins: usize,
+    outputs: Outputs,
+) -> usize {
+    let px = width * width;
+    let mut b = px * (4 * samples + 8);
+    if outputs.image {
+        b += px * channels * 4;
+    }
+    if outputs.range {
+        b += px * 8;
+    }
+    if outputs.profile {
+        b += n_bins * channels * 8;
+    }
+    b
+}
+
+/// How many attitudes of `bytes` each to render at once on `threads` threads within
+/// [`CPU_MEMORY_BUDGET`] (at least one).
+pub fn attitudes_at_once(bytes: usize, threads: usize) -> usize {
+    (CPU_MEMORY_BUDGET / bytes.max(1)).clamp(1, threads.max(1))
+}
+
 /// The whole renderer on the CPU in f64 (twin of `gpu::render`, without supersampling
 /// of the image outputs: `sensor.supersampling` must be 1).
 pub fn render_cpu(
@@ -625,97 +677,106 @@ pub fn render_cpu(
     let edges: Vec<f64> = (0..=nb)
         .map(|k| lay.r_min + k as f64 * sensor.bin_width)
         .collect();
-    #[allow(clippy::type_complexity)]
-    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>)> = rotations
-        .par_iter()
-        .map(|rot| {
-            let offsets = super::gpu::sample_offsets(sensor.samples);
-            let ids: Vec<Vec<u32>> = offsets
-                .iter()
-                .map(|&uv| visibility_at(mesh, rot, w, lay.ext, uv))
-                .collect();
-            let beta = sensor.bistatic_angle;
-            let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
-            // only what is requested is kept (a profile-only batch holds no images)
-            let mut img = vec![0.0f32; if outputs.image { w * w * ch } else { 0 }];
-            let mut rng = vec![f32::NAN; if outputs.range { w * w } else { 0 }];
-            let mut cov = vec![0.0f32; if outputs.range { w * w } else { 0 }];
-            let mut prof = vec![0.0f64; if outputs.profile { nb * ch } else { 0 }];
-            let mut tot = vec![0.0f64; ch];
-            let mut weights = vec![0.0f64; nb];
-            for k in 0..w * w {
-                let (row, col) = (k / w, k % w);
-                let parts = if sensor.analytic {
-                    analytic_parts(mesh, rot, &lay, &ids[0], row, col)
-                } else {
-                    sampled_parts(&ids, &offsets, mesh.surfaces(), k)
+    let render_one = |rot: &Rot| {
+        let offsets = super::gpu::sample_offsets(sensor.samples);
+        let ids: Vec<Vec<u32>> = offsets
+            .iter()
+            .map(|&uv| visibility_at(mesh, rot, w, lay.ext, uv))
+            .collect();
+        let beta = sensor.bistatic_angle;
+        let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
+        // only what is requested is kept (a profile-only batch holds no images)
+        let mut img = vec![0.0f32; if outputs.image { w * w * ch } else { 0 }];
+        let mut rng = vec![f32::NAN; if outputs.range { w * w } else { 0 }];
+        let mut cov = vec![0.0f32; if outputs.range { w * w } else { 0 }];
+        let mut prof = vec![0.0f64; if outputs.profile { nb * ch } else { 0 }];
+        let mut tot = vec![0.0f64; ch];
+        let mut weights = vec![0.0f64; nb];
+        for k in 0..w * w {
+            let (row, col) = (k / w, k % w);
+            let parts = if sensor.analytic {
+                analytic_parts(mesh, rot, &lay, &ids[0], row, col)
+            } else {
+                sampled_parts(&ids, &offsets, mesh.surfaces(), k)
+            };
+            let (mut cov_sum, mut r_sum) = (0.0f64, 0.0f64);
+            let mut pixel = vec![0.0f64; ch];
+            for part in &parts {
+                let tri = part.tri;
+                let x = -lay.ext + (col as f64 + part.centre[0]) * lay.pix;
+                let y = lay.ext - (row as f64 + part.centre[1]) * lay.pix;
+                let Some(mut s) = shade_point(mesh, rot, tri, x, y, &lay, beta, brdf) else {
+                    continue;
                 };
-                let (mut cov_sum, mut r_sum) = (0.0f64, 0.0f64);
-                let mut pixel = vec![0.0f64; ch];
-                for part in &parts {
-                    let tri = part.tri;
-                    let x = -lay.ext + (col as f64 + part.centre[0]) * lay.pix;
-                    let y = lay.ext - (row as f64 + part.centre[1]) * lay.pix;
-                    let Some(mut s) = shade_point(mesh, rot, tri, x, y, &lay, beta, brdf) else {
-                        continue;
-                    };
-                    // cast shadow: the point stays covered (range reported) but returns nothing
-                    if let Some(tx) = &tx {
-                        let lit = s.mueller.iter().flatten().any(|&v| v != 0.0);
-                        if lit && shadowed(tx, tri, s.point) {
-                            s.mueller = [[0.0; 4]; 4];
-                        }
+                // cast shadow: the point stays covered (range reported) but returns nothing
+                if let Some(tx) = &tx {
+                    let lit = s.mueller.iter().flatten().any(|&v| v != 0.0);
+                    if lit && shadowed(tx, tri, s.point) {
+                        s.mueller = [[0.0; 4]; 4];
                     }
-                    let frac = part.frac;
-                    cov_sum += frac;
-                    r_sum += frac * s.range;
-                    let vals: Vec<f64> = match sensor.polarization {
-                        None => (0..16).map(|e| frac * s.mueller[e / 4][e % 4]).collect(),
-                        Some(st) => (0..ch)
-                            .map(|i| frac * (0..4).map(|j| s.mueller[i][j] * st[j]).sum::<f64>())
-                            .collect(),
-                    };
-                    for c in 0..ch {
-                        pixel[c] += vals[c];
+                }
+                let frac = part.frac;
+                cov_sum += frac;
+                r_sum += frac * s.range;
+                let vals: Vec<f64> = match sensor.polarization {
+                    None => (0..16).map(|e| frac * s.mueller[e / 4][e % 4]).collect(),
+                    Some(st) => (0..ch)
+                        .map(|i| frac * (0..4).map(|j| s.mueller[i][j] * st[j]).sum::<f64>())
+                        .collect(),
+                };
+                for c in 0..ch {
+                    pixel[c] += vals[c];
+                }
+                if outputs.profile && vals[0] != 0.0 {
+                    // the footprint of the part of the pixel it spans (whole: 1)
+                    let (a, b) = (part.span[0] * s.widths.0, part.span[1] * s.widths.1);
+                    match &sensor.pulse {
+                        Some(p) => p.bin_weights(s.range, a, b, &edges, &mut weights),
+                        None => pulse::bin_weights_folded(
+                            s.range,
+                            a,
+                            b,
+                            sensor.sigma_range,
+                            lay.support + 0.5 * (a + b),
+                            &edges,
+                            &mut weights,
+                        ),
                     }
-                    if outputs.profile && vals[0] != 0.0 {
-                        // the footprint of the part of the pixel it spans (whole: 1)
-                        let (a, b) = (part.span[0] * s.widths.0, part.span[1] * s.widths.1);
-                        match &sensor.pulse {
-                            Some(p) => p.bin_weights(s.range, a, b, &edges, &mut weights),
-                            None => pulse::bin_weights_folded(
-                                s.range,
-                                a,
-                                b,
-                                sensor.sigma_range,
-                                lay.support + 0.5 * (a + b),
-                                &edges,
-                                &mut weights,
-                            ),
-                        }
-                        for (b, &wt) in weights.iter().enumerate() {
-                            if wt != 0.0 {
-                                for c in 0..ch {
-                                    prof[b * ch + c] += wt * vals[c];
-                                }
+                    for (b, &wt) in weights.iter().enumerate() {
+                        if wt != 0.0 {
+                            for c in 0..ch {
+                                prof[b * ch + c] += wt * vals[c];
                             }
                         }
                     }
                 }
-                if cov_sum > 0.0 && outputs.range {
-                    rng[k] = (r_sum / cov_sum) as f32;
-                    cov[k] = cov_sum as f32;
-                }
-                for c in 0..ch {
-                    if outputs.image {
-                        img[k * ch + c] = pixel[c] as f32;
-                    }
-                    tot[c] += pixel[c];
-                }
             }
-            (img, rng, prof, tot, cov)
-        })
-        .collect();
+            if cov_sum > 0.0 && outputs.range {
+                rng[k] = (r_sum / cov_sum) as f32;
+                cov[k] = cov_sum as f32;
+            }
+            for c in 0..ch {
+                if outputs.image {
+                    img[k * ch + c] = pixel[c] as f32;
+                }
+                tot[c] += pixel[c];
+            }
+        }
+        (img, rng, prof, tot, cov)
+    };
+    // attitudes in parallel (at most one per thread at a time), fewer at a time when that
+    // many would exceed the memory budget
+    let threads = rayon::current_num_threads();
+    let at_once = attitudes_at_once(attitude_bytes(w, sensor.samples, ch, nb, outputs), threads);
+    #[allow(clippy::type_complexity)]
+    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>)> = if at_once >= threads {
+        rotations.par_iter().map(render_one).collect()
+    } else {
+        rotations
+            .chunks(at_once)
+            .flat_map(|c| c.par_iter().map(render_one).collect::<Vec<_>>())
+            .collect()
+    };
     let n = rotations.len();
     let cov: Vec<f32> = per.iter().flat_map(|p| p.4.iter().copied()).collect();
     Rendered {
@@ -804,4 +865,39 @@ pub fn render_supersampled(
         r.pixel_size *= ss as f64;
     }
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cpu_renderers_stay_within_the_memory_budget() {
+        let all = Outputs {
+            image: true,
+            range: true,
+            profile: true,
+        };
+        // 128 x 128, 8 samples, Mueller: ids 32, depth 8, image 64, range + coverage 8
+        // bytes per pixel, and the profile
+        let b = attitude_bytes(128, 8, 16, 100, all);
+        assert_eq!(b, 128 * 128 * (4 * 8 + 8 + 16 * 4 + 8) + 100 * 16 * 8);
+        assert_eq!(attitudes_at_once(b, 16), 16); // small: one per thread
+        let profile_only = Outputs {
+            image: false,
+            range: false,
+            profile: true,
+        };
+        assert_eq!(
+            attitude_bytes(128, 8, 16, 100, profile_only),
+            128 * 128 * 40 + 100 * 16 * 8
+        );
+        // the largest image side at 16 samples (8192^2 x 144 bytes, 9.7 GB): one at a time
+        let big = attitude_bytes(8192, 16, 16, 1000, all);
+        assert!(big > CPU_MEMORY_BUDGET);
+        assert_eq!(attitudes_at_once(big, 16), 1);
+        // in between: as many as fit
+        assert_eq!(attitudes_at_once(CPU_MEMORY_BUDGET / 3 + 1, 16), 2);
+        assert_eq!(attitudes_at_once(1, 0), 1);
+    }
 }
