@@ -693,6 +693,11 @@ pub fn render_cpu(
         let mut tot = vec![0.0f64; ch];
         let mut weights = vec![0.0f64; nb];
         for k in 0..w * w {
+            // a pixel none of whose samples sees the mesh adds nothing (analytic coverage
+            // also looks at the neighbours' centres)
+            if !sensor.analytic && ids.iter().all(|s_ids| s_ids[k] == 0) {
+                continue;
+            }
             let (row, col) = (k / w, k % w);
             let parts = if sensor.analytic {
                 analytic_parts(mesh, rot, &lay, &ids[0], row, col)
@@ -700,7 +705,7 @@ pub fn render_cpu(
                 sampled_parts(&ids, &offsets, mesh.surfaces(), k)
             };
             let (mut cov_sum, mut r_sum) = (0.0f64, 0.0f64);
-            let mut pixel = vec![0.0f64; ch];
+            let mut pixel = [0.0f64; 16];
             for part in &parts {
                 let tri = part.tri;
                 let x = -lay.ext + (col as f64 + part.centre[0]) * lay.pix;
@@ -718,12 +723,13 @@ pub fn render_cpu(
                 let frac = part.frac;
                 cov_sum += frac;
                 r_sum += frac * s.range;
-                let vals: Vec<f64> = match sensor.polarization {
-                    None => (0..16).map(|e| frac * s.mueller[e / 4][e % 4]).collect(),
-                    Some(st) => (0..ch)
-                        .map(|i| frac * (0..4).map(|j| s.mueller[i][j] * st[j]).sum::<f64>())
-                        .collect(),
-                };
+                let mut vals = [0.0f64; 16];
+                for (c, v) in vals.iter_mut().enumerate().take(ch) {
+                    *v = match sensor.polarization {
+                        None => frac * s.mueller[c / 4][c % 4],
+                        Some(st) => frac * (0..4).map(|j| s.mueller[c][j] * st[j]).sum::<f64>(),
+                    };
+                }
                 for c in 0..ch {
                     pixel[c] += vals[c];
                 }
