@@ -26,25 +26,58 @@ pub fn visibility(mesh: &Mesh, rot: &Rot, width: usize, ext: f64) -> Vec<u32> {
 /// delta`), row-major `width x width` (0: empty). Twin of `shaders/visibility.wgsl` for
 /// one visibility sample ([`crate::render::gpu::sample_offsets`]).
 pub fn visibility_at(mesh: &Mesh, rot: &Rot, width: usize, ext: f64, uv: [f64; 2]) -> Vec<u32> {
+    rasterize(&project(mesh, rot), width, ext, uv)
+}
+
+/// A triangle seen from the telescope at one attitude: its rotated corners, the projected
+/// signed area `den` (twice the area in `x, y`; > 0 facing the telescope on an
+/// outward-wound mesh) and its bounding box `[x min, x max, y min, y max]`.
+pub struct Projected {
+    p: [V3; 3],
+    den: f64,
+    bbox: [f64; 4],
+}
+
+/// Every triangle of `mesh` at attitude `rot`, in face order (what [`rasterize`] draws for
+/// each visibility sample); `None` for triangles edge-on to the telescope and, on a closed
+/// outward-wound mesh ([`Mesh::closed`]), for back faces, which the nearest hit from
+/// outside never is (the kernel's raster pass culls them too).
+pub fn project(mesh: &Mesh, rot: &Rot) -> Vec<Option<Projected>> {
+    mesh.faces
+        .iter()
+        .map(|f| {
+            let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
+            let den = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
+                - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
+            if den == 0.0 || (mesh.closed && den < 0.0) {
+                return None;
+            }
+            let xs = p.map(|v| v[0]);
+            let ys = p.map(|v| v[1]);
+            let bbox = [
+                xs.iter().copied().fold(f64::INFINITY, f64::min),
+                xs.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                ys.iter().copied().fold(f64::INFINITY, f64::min),
+                ys.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            ];
+            Some(Projected { p, den, bbox })
+        })
+        .collect()
+}
+
+/// Triangle index + 1 nearest the telescope at the point `(u, v)` of each pixel (as
+/// [`visibility_at`]), from the projected triangles of [`project`].
+pub fn rasterize(tris: &[Option<Projected>], width: usize, ext: f64, uv: [f64; 2]) -> Vec<u32> {
     let pix = 2.0 * ext / width as f64;
     let [u, v] = uv;
     let mut ids = vec![0u32; width * width];
     let mut depth = vec![f64::NEG_INFINITY; width * width];
-    for (t, f) in mesh.faces.iter().enumerate() {
-        let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
-        let den =
-            (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
-        if den == 0.0 {
+    for (t, tri) in tris.iter().enumerate() {
+        let Some(Projected { p, den, bbox }) = tri else {
             continue;
-        }
-        let (xmin, xmax) = (
-            p.iter().map(|v| v[0]).fold(f64::INFINITY, f64::min),
-            p.iter().map(|v| v[0]).fold(f64::NEG_INFINITY, f64::max),
-        );
-        let (ymin, ymax) = (
-            p.iter().map(|v| v[1]).fold(f64::INFINITY, f64::min),
-            p.iter().map(|v| v[1]).fold(f64::NEG_INFINITY, f64::max),
-        );
+        };
+        let den = *den;
+        let [xmin, xmax, ymin, ymax] = *bbox;
         let j0 = (((xmin + ext) / pix - u).ceil().max(0.0)) as usize;
         let j1 = (((xmax + ext) / pix - u).floor().min(width as f64 - 1.0)) as isize;
         let i0 = (((ext - ymax) / pix - v).ceil().max(0.0)) as usize;
@@ -679,9 +712,10 @@ pub fn render_cpu(
         .collect();
     let render_one = |rot: &Rot| {
         let offsets = super::gpu::sample_offsets(sensor.samples);
+        let tris = project(mesh, rot);
         let ids: Vec<Vec<u32>> = offsets
             .iter()
-            .map(|&uv| visibility_at(mesh, rot, w, lay.ext, uv))
+            .map(|&uv| rasterize(&tris, w, lay.ext, uv))
             .collect();
         let beta = sensor.bistatic_angle;
         let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
@@ -905,5 +939,28 @@ mod tests {
         // in between: as many as fit
         assert_eq!(attitudes_at_once(CPU_MEMORY_BUDGET / 3 + 1, 16), 2);
         assert_eq!(attitudes_at_once(1, 0), 1);
+    }
+
+    /// Back faces of a closed, outward-wound mesh are never the nearest hit: culling them
+    /// (what `project` does when `Mesh::closed`) leaves every pixel's visible triangle as
+    /// it was, and the faces it drops are about half of them.
+    #[test]
+    fn culling_back_faces_of_closed_meshes_changes_no_pixel() {
+        let closed = crate::render::gpu::tests::uv_sphere(0.5, 24, 48);
+        assert!(closed.closed);
+        let mut open = closed.clone();
+        open.closed = false;
+        let rot = crate::render::geometry::rotations_from_quaternions(&[
+            [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt())
+        ])
+        .unwrap()[0];
+        let (tc, to) = (project(&closed, &rot), project(&open, &rot));
+        let kept = tc.iter().filter(|t| t.is_some()).count();
+        assert!(kept < to.iter().filter(|t| t.is_some()).count() * 6 / 10 && kept > 0);
+        for uv in [[0.5, 0.5], [0.1875, 0.8125]] {
+            let (a, b) = (rasterize(&tc, 96, 0.5, uv), rasterize(&to, 96, 0.5, uv));
+            assert!(a.iter().filter(|&&id| id != 0).count() > 5000);
+            assert_eq!(a, b);
+        }
     }
 }
