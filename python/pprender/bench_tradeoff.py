@@ -220,15 +220,6 @@ DOUBLE_ORDERS = (16, 32, 48, 96)
 MASKINGS = ("table", "exact", "seed")
 
 
-def _knob_time(scene: pprender.Scene, sensor: pprender.Lidar, rots: np.ndarray, repeats: int,
-               device: str) -> float:
-    from .bench_render import best_time
-
-    pprender.render(scene, sensor, rots[:1], outputs=("profile", "mueller"), device=device)  # warm
-    return best_time(lambda: pprender.render(scene, sensor, rots, outputs=("profile", "mueller"), device=device),
-                     repeats)[0] / len(rots)
-
-
 def measure_knobs(quick: bool = False, batch: int = 8, repeats: int = 3, device: str = "auto",
                   progress: bool = True) -> list[KnobRow]:
     """Each knob of the dial varied alone (the method is in ``knobs_text``)."""
@@ -249,7 +240,7 @@ def measure_knobs(quick: bool = False, batch: int = 8, repeats: int = 3, device:
             sensor: pprender.Lidar, rots: np.ndarray, setup: float = 0.0) -> None:
         r = pprender.render(scene, sensor, rots, outputs=out, device=device)
         e = _errors(r, ref, f)
-        secs = _knob_time(scene, sensor, timing_rots, repeats, device)
+        secs = _time(scene, sensor, timing_rots, repeats, device)
         res = sensor.effective_resolution(scene.radius)
         add(KnobRow(group, sname, knob, value, res, sensor.effective_pixel_samples() * sensor.supersampling ** 2,
                     secs, setup + r.table_seconds, e["img_rms00"], e["pixel_rel"], e["prof_l1"], e["total_rel"]))

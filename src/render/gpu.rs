@@ -212,6 +212,20 @@ impl Gpu {
             },
             count: None,
         };
+        let texture = |binding: u32,
+                       sample_type: wgpu::TextureSampleType,
+                       view_dimension: wgpu::TextureViewDimension,
+                       multisampled: bool,
+                       vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: vis,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension,
+                multisampled,
+            },
+            count: None,
+        };
         let vs = wgpu::ShaderStages::VERTEX;
         let vis_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("visibility"),
@@ -286,16 +300,13 @@ impl Gpu {
         let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gather"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: true,
-                    },
-                    count: None,
-                },
+                texture(
+                    0,
+                    wgpu::TextureSampleType::Float { filterable: false },
+                    wgpu::TextureViewDimension::D2,
+                    true,
+                    cs,
+                ),
                 storage(1, false, cs),
                 wgpu::BindGroupLayoutEntry {
                     binding: 2,
@@ -328,16 +339,13 @@ impl Gpu {
         let shade_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("shade"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture(
+                    0,
+                    wgpu::TextureSampleType::Uint,
+                    wgpu::TextureViewDimension::D2Array,
+                    false,
+                    cs,
+                ),
                 storage(1, true, cs),
                 storage(2, true, cs),
                 storage(3, true, cs),
@@ -347,16 +355,13 @@ impl Gpu {
                 storage(7, false, cs),
                 storage(8, false, cs),
                 // triangle ids seen from the transmitter (the receiver's when monostatic)
-                wgpu::BindGroupLayoutEntry {
-                    binding: 9,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture(
+                    9,
+                    wgpu::TextureSampleType::Uint,
+                    wgpu::TextureViewDimension::D2Array,
+                    false,
+                    cs,
+                ),
                 // the receiver's ids with K >= 4 samples (gather.wgsl)
                 storage(10, true, cs),
             ],
