@@ -417,17 +417,20 @@ pub fn z_of(scale: f64, cos_t: f64, sin_t: f64) -> f64 {
     }
 }
 
-/// The 16 `z`-interpolated values of psi row `j` of a part at interval `i`, fraction `t`
-/// (`ln M00` clamped to the two bracketing nodes).
+/// The `z`-interpolated values of psi row `j` of a part at interval `i`, fraction `t`, of
+/// the elements in `mask` (bit `k` for element `k`; the others are left 0; `ln M00` is
+/// always interpolated, clamped to the two bracketing nodes).
 #[inline]
-fn interp_row(p: &TablePart, j: usize, i: usize, t: f64) -> [f64; 16] {
+fn interp_row(p: &TablePart, j: usize, i: usize, t: f64, mask: u32) -> [f64; 16] {
     let n = p.n_z;
     let row = j * (n + 1);
     let at = |ii: usize| &p.data[(row + ii) * 16..(row + ii) * 16 + 16];
     let (v0, v1, v2, v3) = (at(i.max(1) - 1), at(i), at(i + 1), at((i + 2).min(n)));
     let mut out = [0.0; 16];
     for k in 0..16 {
-        out[k] = catmull_rom_ends(v0[k], v1[k], v2[k], v3[k], i, n, t);
+        if k == 0 || mask & (1 << k) != 0 {
+            out[k] = catmull_rom_ends(v0[k], v1[k], v2[k], v3[k], i, n, t);
+        }
     }
     out[0] = out[0].clamp(v1[0].min(v2[0]), v1[0].max(v2[0]));
     out
@@ -436,18 +439,23 @@ fn interp_row(p: &TablePart, j: usize, i: usize, t: f64) -> [f64; 16] {
 /// One part at `(z, psi)`, `psi` in `[0, pi]`: `(ln M00, [1, M_ab / M00 ...])` with
 /// element 0 of the array being `ln M00` (the layout of a node).
 pub fn eval_part(p: &TablePart, z: f64, psi: f64) -> [f64; 16] {
+    eval_part_masked(p, z, psi, 0xffff)
+}
+
+/// [`eval_part`] for the elements in `mask` only (the others 0; `ln M00` always).
+fn eval_part_masked(p: &TablePart, z: f64, psi: f64, mask: u32) -> [f64; 16] {
     let (i, t) = cell(z * p.n_z as f64, p.n_z);
     let mut out = if p.n_psi == 0 {
-        interp_row(p, 0, i, t)
+        interp_row(p, 0, i, t, mask)
     } else {
         let np = p.n_psi;
         let (j, u) = cell(psi * np as f64 / PI, np);
         let r0 = if j == 0 { 1 } else { j - 1 };
         let r3 = if j + 2 > np { np - 1 } else { j + 2 };
-        let a = interp_row(p, r0, i, t);
-        let b = interp_row(p, j, i, t);
-        let c = interp_row(p, j + 1, i, t);
-        let d = interp_row(p, r3, i, t);
+        let a = interp_row(p, r0, i, t, mask);
+        let b = interp_row(p, j, i, t, mask);
+        let c = interp_row(p, j + 1, i, t, mask);
+        let d = interp_row(p, r3, i, t, mask);
         let mut o = [0.0; 16];
         for k in 0..16 {
             let s0 = if j == 0 { MIRROR_SIGN[k] } else { 1.0 };
@@ -463,10 +471,10 @@ pub fn eval_part(p: &TablePart, z: f64, psi: f64) -> [f64; 16] {
     out
 }
 
-/// The Mueller matrix of one part at `(theta, psi)` (table frame, `psi` in `[0, pi]`).
-fn part_matrix(p: &TablePart, theta: f64, psi: f64) -> Mat4 {
-    let (s, c) = theta.sin_cos();
-    let v = eval_part(p, z_of(p.scale, c, s), psi);
+/// The Mueller matrix of one part at `theta` given by `(cos, sin)` and `psi` (table frame,
+/// `psi` in `[0, pi]`), the elements in `mask` (the others 0; `M00` always).
+fn part_matrix(p: &TablePart, c: f64, s: f64, psi: f64, mask: u32) -> Mat4 {
+    let v = eval_part_masked(p, z_of(p.scale, c, s), psi, mask);
     let mut m00 = v[0].exp();
     if p.cos_weighted {
         m00 = if c > 0.0 { m00 / c } else { 0.0 };
@@ -746,10 +754,18 @@ impl BrdfTable {
     /// The interpolated BRDF at table coordinates (`psi` in `[-pi, pi]`; negative `psi`
     /// through the mirror relation), in the table's frame.
     pub fn eval(&self, theta: f64, psi: f64) -> Mat4 {
+        let (s, c) = theta.sin_cos();
+        self.eval_masked(c, s, psi, 0xffff)
+    }
+
+    /// [`BrdfTable::eval`] at `theta` given by `(cos, sin)`, for the elements in `mask` only
+    /// (bit `4 a + b` for `M_ab`; the others are 0, `M00` is always evaluated): the CPU
+    /// twin of the kernel's `ELEMENT_MASK` lookup.
+    pub fn eval_masked(&self, cos_t: f64, sin_t: f64, psi: f64, mask: u32) -> Mat4 {
         let (a, mirrored) = (psi.abs(), psi < 0.0);
         let mut m = [[0.0; 4]; 4];
         for p in &self.parts {
-            let pm = part_matrix(p, theta, a);
+            let pm = part_matrix(p, cos_t, sin_t, a, mask);
             for r in 0..4 {
                 for c in 0..4 {
                     m[r][c] += pm[r][c];
@@ -851,13 +867,14 @@ impl BrdfTable {
                 .par_iter()
                 .map(|&(theta, psi)| {
                     let want = part_reference(&m, kind, self.frame, self.beta, theta, psi);
-                    let got = part_matrix(p, theta, psi);
+                    let (st, ct) = theta.sin_cos();
+                    let got = part_matrix(p, ct, st, psi, 0xffff);
                     let others: f64 = self
                         .parts
                         .iter()
                         .enumerate()
                         .filter(|(q, _)| *q != pi_)
-                        .map(|(_, q)| part_matrix(q, theta, psi)[0][0])
+                        .map(|(_, q)| part_matrix(q, ct, st, psi, 1)[0][0])
                         .sum();
                     let total = (want[0][0] + others).max(floor);
                     if !(total > 0.0) {

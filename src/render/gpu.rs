@@ -1999,7 +1999,7 @@ pub(crate) mod tests {
 }
 
 #[cfg(test)]
-mod twin_tests {
+pub(crate) mod twin_tests {
     use super::tests::uv_sphere;
     use super::*;
     use crate::brdf::table::{BrdfTable, BrdfTableOptions, TableFrame};
@@ -2009,7 +2009,7 @@ mod twin_tests {
     use crate::optics::fresnel::{Eta, C64};
     use crate::render::twin;
 
-    fn metal() -> Material {
+    pub fn metal() -> Material {
         let mut spec = MaterialSpec::new(
             Distribution::Beckmann { alpha: 0.3 },
             Eta::Complex(C64::new(0.2, 3.4)),
@@ -2077,7 +2077,8 @@ mod twin_tests {
                 profile: true,
             };
             let g = render(&gpu, &mesh, &tables, &sensor, &rot, out).unwrap();
-            let by_table = |_m: usize, wi: [f64; 3], wo: [f64; 3]| table.eval_dirs(wi, wo);
+            // the twin as `Lidar(arithmetic="f64")` runs it
+            let by_table = twin::Tables(std::slice::from_ref(&table));
             let by_core =
                 |_m: usize, wi: [f64; 3], wo: [f64; 3]| crate::brdf::eval(&mat, wi, wo, Frame::Sp);
             let t = twin::render_cpu(&mesh, &sensor, &rot, out, &by_table);
@@ -2207,11 +2208,11 @@ mod shadow_tests {
                         k / w,
                         k % w,
                         &lay,
-                        beta,
+                        &sensor,
                         &brdf,
                     )
                     .unwrap();
-                    if s.mueller[0][0] > 0.0 && twin::shadowed(&view, id as usize - 1, s.point) {
+                    if s.values[0] > 0.0 && twin::shadowed(&view, id as usize - 1, s.point) {
                         n_shadow += 1;
                     }
                 }

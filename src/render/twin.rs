@@ -1,16 +1,19 @@
 //! CPU twins of the kernels, in f64: `visibility` (of `shaders/visibility.wgsl`) by
 //! rasterizing pixel centres exactly, `shade_pixel` and `render_cpu` (of
 //! `shaders/shade.wgsl`) with any BRDF: the material's tables (what the GPU uses) or the
-//! exact core evaluation. The Stokes bases here come from [`crate::optics::frames`]'s
-//! `beam_bases` in a local frame (the kernel builds them from cross products), so the
-//! comparison also checks the frame handling. Transmitter cast shadows (bistatic) are
+//! exact core evaluation ([`Brdf`]). With the core, the Stokes bases come from
+//! [`crate::optics::frames`]'s `beam_bases` in a local frame (the kernel builds them from
+//! cross products), so comparing the two checks the frame handling; with the tables
+//! ([`Tables`]) the twin looks them up as the kernel does, and a test checks that against
+//! [`crate::brdf::table::BrdfTable::eval_dirs`] and `change_bases`. Transmitter cast shadows (bistatic) are
 //! decided here by exact ray casting in f64 ([`shadowed`]), independently of the kernel's
 //! shadow-map rule. Conventions: [`crate::render`].
 
 use super::geometry::{rotate, transmitter_rotation, Mesh, Rot};
 use super::gpu::{Layout, Outputs, Rendered, SensorSetup};
 use super::pulse;
-use crate::optics::frames::{beam_bases, change_bases, cross, dot, normalize, Frame, V3};
+use crate::brdf::table::{BrdfTable, TableFrame};
+use crate::optics::frames::{beam_bases, cross, dot, normalize, Frame, V3};
 use crate::optics::mueller::Mat4;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -29,13 +32,12 @@ pub fn visibility_at(mesh: &Mesh, rot: &Rot, width: usize, ext: f64, uv: [f64; 2
     rasterize(&project(mesh, rot), width, ext, uv)
 }
 
-/// A triangle seen from the telescope at one attitude: its rotated corners, the projected
-/// signed area `den` (twice the area in `x, y`; > 0 facing the telescope on an
-/// outward-wound mesh) and its bounding box `[x min, x max, y min, y max]`.
+/// A triangle seen from the telescope at one attitude: its rotated corners and the
+/// projected signed area `den` (twice the area in `x, y`; > 0 facing the telescope on an
+/// outward-wound mesh).
 pub struct Projected {
     p: [V3; 3],
     den: f64,
-    bbox: [f64; 4],
 }
 
 /// Every triangle of `mesh` at attitude `rot`, in face order (what [`rasterize`] draws for
@@ -43,26 +45,64 @@ pub struct Projected {
 /// outward-wound mesh ([`Mesh::closed`]), for back faces, which the nearest hit from
 /// outside never is (the kernel's raster pass culls them too).
 pub fn project(mesh: &Mesh, rot: &Rot) -> Vec<Option<Projected>> {
+    project_rotated(mesh, &rotate_vertices(mesh, rot))
+}
+
+/// The vertices of `mesh` at attitude `rot`.
+pub fn rotate_vertices(mesh: &Mesh, rot: &Rot) -> Vec<V3> {
+    mesh.vertices.iter().map(|&v| rotate(rot, v)).collect()
+}
+
+/// [`project`] from the vertices already rotated ([`rotate_vertices`]).
+pub fn project_rotated(mesh: &Mesh, vertices: &[V3]) -> Vec<Option<Projected>> {
     mesh.faces
         .iter()
         .map(|f| {
-            let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
+            let p = f.map(|k| vertices[k as usize]);
             let den = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
                 - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
             if den == 0.0 || (mesh.closed && den < 0.0) {
                 return None;
             }
-            let xs = p.map(|v| v[0]);
-            let ys = p.map(|v| v[1]);
-            let bbox = [
-                xs.iter().copied().fold(f64::INFINITY, f64::min),
-                xs.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                ys.iter().copied().fold(f64::INFINITY, f64::min),
-                ys.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-            ];
-            Some(Projected { p, den, bbox })
+            Some(Projected { p, den })
         })
         .collect()
+}
+
+/// The pixels `[i0, i1, j0, j1]` (rows `i0..=i1`, columns `j0..=j1`) whose point `(u, v)`
+/// lies in the bounding box of the projected corners `p`; `None` if none does.
+fn pixel_box(p: &[V3; 3], width: usize, ext: f64, uv: [f64; 2]) -> Option<[usize; 4]> {
+    let pix = 2.0 * ext / width as f64;
+    let [u, v] = uv;
+    let (xmin, xmax) = (
+        p[0][0].min(p[1][0]).min(p[2][0]),
+        p[0][0].max(p[1][0]).max(p[2][0]),
+    );
+    let (ymin, ymax) = (
+        p[0][1].min(p[1][1]).min(p[2][1]),
+        p[0][1].max(p[1][1]).max(p[2][1]),
+    );
+    let last = width as isize - 1;
+    let j0 = ceil((xmin + ext) / pix - u).max(0);
+    let j1 = floor((xmax + ext) / pix - u).min(last);
+    let i0 = ceil((ext - ymax) / pix - v).max(0);
+    let i1 = floor((ext - ymin) / pix - v).min(last);
+    (j1 >= 0 && i1 >= 0).then_some([i0 as usize, i1 as usize, j0 as usize, j1 as usize])
+}
+
+/// `x.floor()` as an integer for `|x| < 2^53` (saturating beyond; a NaN gives 0), by
+/// truncation: `f64::floor` is a libm call on baseline x86-64.
+#[inline]
+fn floor(x: f64) -> isize {
+    let t = x as isize;
+    t - ((x < t as f64) as isize)
+}
+
+/// `x.ceil()` as an integer, as [`floor`].
+#[inline]
+fn ceil(x: f64) -> isize {
+    let t = x as isize;
+    t + ((x > t as f64) as isize)
 }
 
 /// Triangle index + 1 nearest the telescope at the point `(u, v)` of each pixel (as
@@ -73,21 +113,16 @@ pub fn rasterize(tris: &[Option<Projected>], width: usize, ext: f64, uv: [f64; 2
     let mut ids = vec![0u32; width * width];
     let mut depth = vec![f64::NEG_INFINITY; width * width];
     for (t, tri) in tris.iter().enumerate() {
-        let Some(Projected { p, den, bbox }) = tri else {
+        let Some(Projected { p, den }) = tri else {
             continue;
         };
         let den = *den;
-        let [xmin, xmax, ymin, ymax] = *bbox;
-        let j0 = (((xmin + ext) / pix - u).ceil().max(0.0)) as usize;
-        let j1 = (((xmax + ext) / pix - u).floor().min(width as f64 - 1.0)) as isize;
-        let i0 = (((ext - ymax) / pix - v).ceil().max(0.0)) as usize;
-        let i1 = (((ext - ymin) / pix - v).floor().min(width as f64 - 1.0)) as isize;
-        if j1 < 0 || i1 < 0 {
+        let Some([i0, i1, j0, j1]) = pixel_box(p, width, ext, uv) else {
             continue;
-        }
-        for i in i0..=(i1 as usize) {
+        };
+        for i in i0..=i1 {
             let y = ext - (i as f64 + v) * pix;
-            for j in j0..=(j1 as usize) {
+            for j in j0..=j1 {
                 let x = -ext + (j as f64 + u) * pix;
                 let (dx, dy) = (x - p[0][0], y - p[0][1]);
                 let l1 = (dx * (p[2][1] - p[0][1]) - dy * (p[2][0] - p[0][0])) / den;
@@ -111,8 +146,10 @@ pub fn rasterize(tris: &[Option<Projected>], width: usize, ext: f64, uv: [f64; 2
 /// A pixel's shading result.
 #[derive(Debug, Clone, Copy)]
 pub struct PixelSample {
-    /// Differential cross-section, Mueller in the telescope bases (m^2).
-    pub mueller: Mat4,
+    /// Differential cross-section in the telescope bases (m^2), the sensor's channels
+    /// ([`SensorSetup::channels`]): the Mueller matrix row-major (16), the Stokes vector
+    /// `M s_tx` (4) or its intensity (1); the rest 0.
+    pub values: [f64; 16],
     pub range: f64,
     /// Sub-pixel range widths `(a, b)` (m).
     pub widths: (f64, f64),
@@ -120,8 +157,170 @@ pub struct PixelSample {
     pub point: V3,
 }
 
-/// `brdf(material, wi_local, wo_local)`: the Mueller BRDF in the `Sp` frame, local `n = z`.
-pub type BrdfFn<'a> = dyn Fn(usize, V3, V3) -> Mat4 + Sync + 'a;
+/// A Mueller BRDF value and the beam bases it is expressed in: unit `x_in` normal to `wi`
+/// and `x_out` normal to `wo` (world frame), with `y_in = -wi x x_in`, `y_out = wo x x_out`.
+pub struct Framed {
+    pub m: Mat4,
+    pub x_in: V3,
+    pub x_out: V3,
+}
+
+/// A BRDF the CPU renderers shade with.
+pub trait Brdf: Sync {
+    /// Material `mat` at the unit shading normal `n` for unit `wi`, `wo` above it (world
+    /// frame). Only the elements in `mask` (bit `4 a + b` for `M_ab`, as
+    /// [`SensorSetup::element_mask`]) need be evaluated; `M00` always is.
+    fn eval_framed(&self, mat: usize, n: V3, wi: V3, wo: V3, mask: u32) -> Framed;
+}
+
+/// `brdf(material, wi_local, wo_local)`: the Mueller BRDF in the `Sp` frame of a local
+/// frame with `n = z` (its tangents from a fixed helper axis), all elements.
+impl<F: Fn(usize, V3, V3) -> Mat4 + Sync> Brdf for F {
+    fn eval_framed(&self, mat: usize, n: V3, wi: V3, wo: V3, _mask: u32) -> Framed {
+        let helper = if n[0].abs() < 0.9 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
+        let t1 = normalize(cross(helper, n));
+        let t2 = cross(n, t1);
+        let to_local = |v: V3| [dot(v, t1), dot(v, t2), dot(v, n)];
+        let to_world = |v: V3| {
+            [
+                v[0] * t1[0] + v[1] * t2[0] + v[2] * n[0],
+                v[0] * t1[1] + v[1] * t2[1] + v[2] * n[1],
+                v[0] * t1[2] + v[1] * t2[2] + v[2] * n[2],
+            ]
+        };
+        let (wil, wol) = (to_local(wi), to_local(wo));
+        let m = self(mat, wil, wol);
+        let (xi, _, xo, _) = beam_bases(Frame::Sp, wil, wol);
+        Framed {
+            m,
+            x_in: to_world(xi),
+            x_out: to_world(xo),
+        }
+    }
+}
+
+/// The renderer's BRDF tables (one per material), looked up as `shade.wgsl` does: bisector
+/// coordinates and bases from cross products with the normal, only the masked elements.
+/// Tables in the `Sp` frame go through [`BrdfTable::eval_dirs`] in a local frame.
+pub struct Tables<'a>(pub &'a [BrdfTable]);
+
+impl Brdf for Tables<'_> {
+    fn eval_framed(&self, mat: usize, n: V3, wi: V3, wo: V3, mask: u32) -> Framed {
+        let table = &self.0[mat];
+        if table.frame != TableFrame::Bisector {
+            let by_dirs = |_: usize, a: V3, b: V3| table.eval_dirs(a, b);
+            return by_dirs.eval_framed(mat, n, wi, wo, mask);
+        }
+        // the lookup of `shade_at`: b the bisector, e_phi = n x b / |n x b|,
+        // psi = atan2((wi - wo).e_phi, (wi - wo).e_theta), e_theta = e_phi x b
+        let b = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+        let cos_t = dot(n, b).clamp(0.0, 1.0);
+        let nxb = cross(n, b);
+        let sin_t = dot(nxb, nxb).sqrt();
+        let e_phi = if sin_t > 0.0 {
+            [nxb[0] / sin_t, nxb[1] / sin_t, nxb[2] / sin_t]
+        } else {
+            any_perp(n)
+        };
+        let psi = if table.beta == 0.0 {
+            0.0
+        } else {
+            let e_theta = cross(e_phi, b);
+            let d = [wi[0] - wo[0], wi[1] - wo[1], wi[2] - wo[2]];
+            dot(d, e_phi).atan2(dot(d, e_theta))
+        };
+        let m = table.eval_masked(cos_t, sin_t, psi, mask);
+        // the table's beam bases: x = e_phi made normal to the beam
+        let across = |w: V3| {
+            let c = dot(e_phi, w);
+            let v = [
+                e_phi[0] - c * w[0],
+                e_phi[1] - c * w[1],
+                e_phi[2] - c * w[2],
+            ];
+            let l = dot(v, v).sqrt();
+            if l > 1e-15 {
+                [v[0] / l, v[1] / l, v[2] / l]
+            } else {
+                any_perp(w)
+            }
+        };
+        let x_in = across(wi);
+        Framed {
+            m,
+            x_in,
+            // monostatic: the same vector
+            x_out: if wo == wi { x_in } else { across(wo) },
+        }
+    }
+}
+
+/// A unit vector normal to unit `k` (as `any_perp` in `shade.wgsl`).
+fn any_perp(k: V3) -> V3 {
+    normalize(if k[0].abs() < 0.9 {
+        cross(k, [1.0, 0.0, 0.0])
+    } else {
+        cross(k, [0.0, 1.0, 0.0])
+    })
+}
+
+/// `(cos 2b, sin 2b)` of the angle `b` given by `(cos b, sin b)`.
+fn double_angle(c: f64, s: f64) -> (f64, f64) {
+    (c * c - s * s, 2.0 * s * c)
+}
+
+/// The sensor's channels ([`SensorSetup::channels`]) of `k L(ao) M L(ai)`, times `s_tx`
+/// for Stokes and intensity outputs, where `L(c, s)` is the Stokes rotation
+/// `[[1,0,0,0],[0,c,s,0],[0,-s,c,0],[0,0,0,1]]` by the double angles `ai`, `ao`.
+fn telescope_values(
+    m: &Mat4,
+    ai: (f64, f64),
+    ao: (f64, f64),
+    k: f64,
+    sensor: &SensorSetup,
+) -> [f64; 16] {
+    let mut out = [0.0; 16];
+    match sensor.polarization {
+        None => {
+            // M L(ai), then L(ao) on the left
+            let mut t = *m;
+            for row in t.iter_mut() {
+                let (a1, a2) = (row[1], row[2]);
+                row[1] = a1 * ai.0 - a2 * ai.1;
+                row[2] = a1 * ai.1 + a2 * ai.0;
+            }
+            for j in 0..4 {
+                let (b1, b2) = (t[1][j], t[2][j]);
+                out[j] = k * t[0][j];
+                out[4 + j] = k * (ao.0 * b1 + ao.1 * b2);
+                out[8 + j] = k * (-ao.1 * b1 + ao.0 * b2);
+                out[12 + j] = k * t[3][j];
+            }
+        }
+        Some(s) => {
+            // v = L(ai) s_tx, u = M v, out = L(ao) u
+            let v = [
+                s[0],
+                ai.0 * s[1] + ai.1 * s[2],
+                -ai.1 * s[1] + ai.0 * s[2],
+                s[3],
+            ];
+            let row = |i: usize| (0..4).map(|j| m[i][j] * v[j]).sum::<f64>();
+            out[0] = k * row(0);
+            if !sensor.intensity_only {
+                let (u1, u2) = (row(1), row(2));
+                out[1] = k * (ao.0 * u1 + ao.1 * u2);
+                out[2] = k * (-ao.1 * u1 + ao.0 * u2);
+                out[3] = k * row(3);
+            }
+        }
+    }
+    out
+}
 
 /// Shade pixel `(row, col)` whose centre sees triangle `tri` (f64 twin of `shade.wgsl`).
 #[allow(clippy::too_many_arguments)]
@@ -132,17 +331,18 @@ pub fn shade_pixel(
     row: usize,
     col: usize,
     lay: &Layout,
-    beta: f64,
-    brdf: &BrdfFn<'_>,
+    sensor: &SensorSetup,
+    brdf: &(impl Brdf + ?Sized),
 ) -> Option<PixelSample> {
     let x = -lay.ext + (col as f64 + 0.5) * lay.pix;
     let y = lay.ext - (row as f64 + 0.5) * lay.pix;
-    shade_point(mesh, rot, tri, x, y, lay, beta, brdf)
+    shade_point(mesh, rot, tri, x, y, lay, sensor, brdf)
 }
 
 /// Shade the point `(x, y)` (telescope frame, m) of triangle `tri`: the differential
-/// cross-section of a whole pixel there, with its range and the pixel's footprint widths
-/// (f64 twin of `shade_at` in `shade.wgsl`); `None` if `tri` is degenerate in projection.
+/// cross-section of a whole pixel there in the sensor's channels, with its range and the
+/// pixel's footprint widths (f64 twin of `shade_at` in `shade.wgsl`); `None` if `tri` is
+/// degenerate in projection.
 #[allow(clippy::too_many_arguments)]
 pub fn shade_point(
     mesh: &Mesh,
@@ -151,11 +351,62 @@ pub fn shade_point(
     x: f64,
     y: f64,
     lay: &Layout,
-    beta: f64,
-    brdf: &BrdfFn<'_>,
+    sensor: &SensorSetup,
+    brdf: &(impl Brdf + ?Sized),
 ) -> Option<PixelSample> {
-    let f = mesh.faces[tri];
-    let p = f.map(|k| rotate(rot, mesh.vertices[k as usize]));
+    let p = mesh.faces[tri].map(|k| rotate(rot, mesh.vertices[k as usize]));
+    shade_at(mesh, rot, tri, &p, x, y, &Beam::new(sensor, lay), brdf)
+}
+
+/// What shading needs of the sensor, the same for every pixel of a render.
+struct Beam<'a> {
+    sensor: &'a SensorSetup,
+    max_extent: f64,
+    pix: f64,
+    wi: V3,
+    wo: V3,
+    /// `wi + wo`
+    sum: V3,
+    /// The telescope's incident basis: `x_in_t = normalize(k_in x Y)`, `y_in_t = k_in x x_in_t`
+    /// (`x_out_t = X`, `y_out_t = Y`).
+    x_in_t: V3,
+    y_in_t: V3,
+    mask: u32,
+}
+
+impl<'a> Beam<'a> {
+    fn new(sensor: &'a SensorSetup, lay: &Layout) -> Self {
+        let beta = sensor.bistatic_angle;
+        let wi = [beta.sin(), 0.0, beta.cos()];
+        let wo = [0.0, 0.0, 1.0];
+        let k_in = [-wi[0], -wi[1], -wi[2]];
+        let x_in_t = normalize(cross(k_in, [0.0, 1.0, 0.0]));
+        Beam {
+            sensor,
+            max_extent: lay.max_extent,
+            pix: lay.pix,
+            wi,
+            wo,
+            sum: [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]],
+            x_in_t,
+            y_in_t: cross(k_in, x_in_t),
+            mask: sensor.element_mask(),
+        }
+    }
+}
+
+/// [`shade_point`] with the triangle's rotated corners `p` (as [`project`] has them).
+#[allow(clippy::too_many_arguments)]
+fn shade_at(
+    mesh: &Mesh,
+    rot: &Rot,
+    tri: usize,
+    p: &[V3; 3],
+    x: f64,
+    y: f64,
+    beam: &Beam<'_>,
+    brdf: &(impl Brdf + ?Sized),
+) -> Option<PixelSample> {
     let den = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
     if den == 0.0 {
         return None;
@@ -165,9 +416,7 @@ pub fn shade_point(
     let l2 = ((p[1][0] - p[0][0]) * dy - (p[1][1] - p[0][1]) * dx) / den;
     let l0 = 1.0 - l1 - l2;
     let z = l0 * p[0][2] + l1 * p[1][2] + l2 * p[2][2];
-    let wi = [beta.sin(), 0.0, beta.cos()];
-    let wo = [0.0, 0.0, 1.0];
-    let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+    let (wi, wo, s) = (beam.wi, beam.wo, beam.sum);
     let range = -0.5 * dot([x, y, z], s);
     let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
     let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
@@ -177,12 +426,12 @@ pub fn shade_point(
     }
     let nz = ng[2].max(1e-12);
     let (dzdx, dzdy) = (-ng[0] / nz, -ng[1] / nz);
-    let a = (0.5 * (s[0] + s[2] * dzdx)).abs() * lay.pix;
-    let b = (0.5 * (s[1] + s[2] * dzdy)).abs() * lay.pix;
-    let widths = (a.min(lay.max_extent), b.min(lay.max_extent));
+    let a = (0.5 * (s[0] + s[2] * dzdx)).abs() * beam.pix;
+    let b = (0.5 * (s[1] + s[2] * dzdy)).abs() * beam.pix;
+    let widths = (a.min(beam.max_extent), b.min(beam.max_extent));
     let mut n = ng;
     if let Some(ns) = &mesh.normals {
-        let c = f.map(|k| ns[k as usize]);
+        let c = mesh.faces[tri].map(|k| ns[k as usize]);
         let v = [0, 1, 2].map(|d| l0 * c[0][d] + l1 * c[1][d] + l2 * c[2][d]);
         let v = rotate(rot, v);
         let l = dot(v, v).sqrt();
@@ -194,55 +443,25 @@ pub fn shade_point(
         }
     }
     let (ci, co) = (dot(n, wi), dot(n, wo));
-    let zero = PixelSample {
-        mueller: [[0.0; 4]; 4],
+    let mut out = PixelSample {
+        values: [0.0; 16],
         range,
         widths,
         point: [x, y, z],
     };
     if ci <= 0.0 || co <= 0.0 {
-        return Some(zero);
+        return Some(out);
     }
-    // local frame (t1, t2, n)
-    let helper = if n[0].abs() < 0.9 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let t1 = normalize(cross(helper, n));
-    let t2 = cross(n, t1);
-    let to_local = |v: V3| [dot(v, t1), dot(v, t2), dot(v, n)];
-    let to_world = |v: V3| {
-        [
-            v[0] * t1[0] + v[1] * t2[0] + v[2] * n[0],
-            v[0] * t1[1] + v[1] * t2[1] + v[2] * n[1],
-            v[0] * t1[2] + v[1] * t2[2] + v[2] * n[2],
-        ]
-    };
-    let (wil, wol) = (to_local(wi), to_local(wo));
     let mat = mesh.face_material[tri] as usize;
-    let m_sp = brdf(mat, wil, wol);
-    let (xi, yi, xo, yo) = beam_bases(Frame::Sp, wil, wol);
-    let (xi, yi, xo, yo) = (to_world(xi), to_world(yi), to_world(xo), to_world(yo));
-    // telescope bases
-    let k_in = [-wi[0], -wi[1], -wi[2]];
-    let xit = normalize(cross(k_in, [0.0, 1.0, 0.0]));
-    let yit = cross(k_in, xit);
-    let (xot, yot) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
-    let mt = change_bases(&m_sp, (xi, yi, xo, yo), (xit, yit, xot, yot));
-    let k = 4.0 * PI * ci * lay.pix * lay.pix;
-    let mut out = [[0.0; 4]; 4];
-    for r in 0..4 {
-        for c in 0..4 {
-            out[r][c] = k * mt[r][c];
-        }
-    }
-    Some(PixelSample {
-        mueller: out,
-        range,
-        widths,
-        point: [x, y, z],
-    })
+    let fr = brdf.eval_framed(mat, n, wi, wo, beam.mask);
+    // S_in (BRDF bases) = L(ai) S_in (telescope): cos = x_in.x_in_t, sin = x_in.y_in_t;
+    // S_out (telescope) = L(ao) S_out (BRDF bases): cos = X.x_out, sin = X.y_out
+    let ai = double_angle(dot(fr.x_in, beam.x_in_t), dot(fr.x_in, beam.y_in_t));
+    let y_out = cross(wo, fr.x_out);
+    let ao = double_angle(fr.x_out[0], y_out[0]);
+    let k = 4.0 * PI * ci * beam.pix * beam.pix;
+    out.values = telescope_values(&fr.m, ai, ao, k, beam.sensor);
+    Some(out)
 }
 
 /// The mesh seen from the transmitter (frame `R_tx = R_y(-beta) R`, `wi` along `+z`):
@@ -348,43 +567,73 @@ pub fn sampled_parts(
     surfaces: &[u32],
     pixel: usize,
 ) -> Vec<Part> {
+    let mut out = Vec::new();
+    sampled_parts_into(ids, offsets, surfaces, pixel, &mut out);
+    out
+}
+
+/// [`sampled_parts`] into `out` (cleared first; no allocation once it has the capacity).
+pub fn sampled_parts_into(
+    ids: &[Vec<u32>],
+    offsets: &[[f64; 2]],
+    surfaces: &[u32],
+    pixel: usize,
+    out: &mut Vec<Part>,
+) {
     let n_s = offsets.len() as f64;
-    // (id, count, sum u, sum v, [min u, max u, min v, max v])
-    #[allow(clippy::type_complexity)]
-    let mut groups: Vec<(u32, usize, f64, f64, [f64; 4])> = Vec::new();
+    out.clear();
+    if let [uv] = offsets {
+        // one sample: the whole pixel (the same as grouping one sample)
+        let id = ids[0][pixel];
+        if id != 0 {
+            out.push(Part {
+                tri: id as usize - 1,
+                frac: 1.0,
+                centre: *uv,
+                span: [1.0, 1.0],
+            });
+        }
+        return;
+    }
+    // while grouping: `frac` holds the count, `centre` the sums of the points, and
+    // `extent` each group's [min u, max u, min v, max v]
+    let mut extent = [[0.0f64; 4]; 16];
     for (s_ids, uv) in ids.iter().zip(offsets) {
         let id = s_ids[pixel];
         if id == 0 {
             continue;
         }
         let surf = surfaces[id as usize - 1];
-        match groups
-            .iter_mut()
-            .find(|g| surfaces[g.0 as usize - 1] == surf)
-        {
+        match out.iter().position(|g| surfaces[g.tri] == surf) {
             Some(g) => {
-                g.1 += 1;
-                g.2 += uv[0];
-                g.3 += uv[1];
-                g.4 = [
-                    g.4[0].min(uv[0]),
-                    g.4[1].max(uv[0]),
-                    g.4[2].min(uv[1]),
-                    g.4[3].max(uv[1]),
+                let p = &mut out[g];
+                p.frac += 1.0;
+                p.centre = [p.centre[0] + uv[0], p.centre[1] + uv[1]];
+                let e = &mut extent[g];
+                *e = [
+                    e[0].min(uv[0]),
+                    e[1].max(uv[0]),
+                    e[2].min(uv[1]),
+                    e[3].max(uv[1]),
                 ];
             }
-            None => groups.push((id, 1, uv[0], uv[1], [uv[0], uv[0], uv[1], uv[1]])),
+            None => {
+                extent[out.len()] = [uv[0], uv[0], uv[1], uv[1]];
+                out.push(Part {
+                    tri: id as usize - 1,
+                    frac: 1.0,
+                    centre: *uv,
+                    span: [0.0; 2],
+                });
+            }
         }
     }
-    groups
-        .iter()
-        .map(|&(id, c, su, sv, e)| Part {
-            tri: id as usize - 1,
-            frac: c as f64 / n_s,
-            centre: [su / c as f64, sv / c as f64],
-            span: [e[1] - e[0] + 1.0 / n_s, e[3] - e[2] + 1.0 / n_s],
-        })
-        .collect()
+    for (p, e) in out.iter_mut().zip(&extent) {
+        let c = p.frac;
+        p.centre = [p.centre[0] / c, p.centre[1] / c];
+        p.frac = c / n_s;
+        p.span = [e[1] - e[0] + 1.0 / n_s, e[3] - e[2] + 1.0 / n_s];
+    }
 }
 
 // Analytic coverage (twin of `coverage_parts` and the COVERAGE branch of `shade.wgsl`,
@@ -694,6 +943,97 @@ pub fn attitudes_at_once(bytes: usize, threads: usize) -> usize {
     (CPU_MEMORY_BUDGET / bytes.max(1)).clamp(1, threads.max(1))
 }
 
+/// One pixel's sums over its parts: covered fraction, fraction-weighted range, values.
+#[derive(Default)]
+struct PixelAcc {
+    cov: f64,
+    range: f64,
+    values: [f64; 16],
+}
+
+/// One attitude's outputs, only those requested (a profile-only batch holds no images).
+struct Accumulator<'a> {
+    sensor: &'a SensorSetup,
+    outputs: Outputs,
+    ch: usize,
+    support: f64,
+    img: Vec<f32>,
+    rng: Vec<f32>,
+    cov: Vec<f32>,
+    prof: Vec<f64>,
+    tot: Vec<f64>,
+    /// Scratch: one part's pulse weights per range bin.
+    weights: Vec<f64>,
+}
+
+impl<'a> Accumulator<'a> {
+    fn new(sensor: &'a SensorSetup, lay: &Layout, outputs: Outputs) -> Self {
+        let (n, ch, nb) = (lay.width * lay.width, sensor.channels(), lay.n_bins);
+        Accumulator {
+            sensor,
+            outputs,
+            ch,
+            support: lay.support,
+            img: vec![0.0; if outputs.image { n * ch } else { 0 }],
+            rng: vec![f32::NAN; if outputs.range { n } else { 0 }],
+            cov: vec![0.0; if outputs.range { n } else { 0 }],
+            prof: vec![0.0; if outputs.profile { nb * ch } else { 0 }],
+            tot: vec![0.0; ch],
+            weights: vec![0.0; nb],
+        }
+    }
+
+    /// Add the shaded part `s` of a pixel to its sums `px` and its pulse to the profile.
+    fn add(&mut self, px: &mut PixelAcc, part: &Part, s: &PixelSample, edges: &[f64]) {
+        let (ch, frac) = (self.ch, part.frac);
+        px.cov += frac;
+        px.range += frac * s.range;
+        let vals = s.values.map(|v| frac * v);
+        for (p, v) in px.values.iter_mut().zip(&vals).take(ch) {
+            *p += v;
+        }
+        if self.outputs.profile && vals[0] != 0.0 {
+            // the footprint of the part of the pixel it spans (whole: 1)
+            let (a, b) = (part.span[0] * s.widths.0, part.span[1] * s.widths.1);
+            let weights = &mut self.weights;
+            match &self.sensor.pulse {
+                Some(p) => p.bin_weights(s.range, a, b, edges, weights),
+                None => pulse::bin_weights_folded(
+                    s.range,
+                    a,
+                    b,
+                    self.sensor.sigma_range,
+                    self.support + 0.5 * (a + b),
+                    edges,
+                    weights,
+                ),
+            }
+            for (bin, &wt) in self.prof.chunks_exact_mut(ch).zip(weights.iter()) {
+                if wt != 0.0 {
+                    for (p, v) in bin.iter_mut().zip(&vals) {
+                        *p += wt * v;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Write pixel `k`'s sums to the images and the totals.
+    fn finish(&mut self, k: usize, px: &PixelAcc) {
+        let ch = self.ch;
+        if px.cov > 0.0 && self.outputs.range {
+            self.rng[k] = (px.range / px.cov) as f32;
+            self.cov[k] = px.cov as f32;
+        }
+        for c in 0..ch {
+            if self.outputs.image {
+                self.img[k * ch + c] = px.values[c] as f32;
+            }
+            self.tot[c] += px.values[c];
+        }
+    }
+}
+
 /// The whole renderer on the CPU in f64 (twin of `gpu::render`, without supersampling
 /// of the image outputs: `sensor.supersampling` must be 1).
 pub fn render_cpu(
@@ -701,7 +1041,7 @@ pub fn render_cpu(
     sensor: &SensorSetup,
     rotations: &[Rot],
     outputs: Outputs,
-    brdf: &BrdfFn<'_>,
+    brdf: &(impl Brdf + ?Sized),
 ) -> Rendered {
     let lay = Layout::new(mesh, sensor);
     let w = lay.width;
@@ -712,97 +1052,64 @@ pub fn render_cpu(
         .collect();
     let render_one = |rot: &Rot| {
         let offsets = super::gpu::sample_offsets(sensor.samples);
-        let tris = project(mesh, rot);
+        let vertices = rotate_vertices(mesh, rot);
+        let tris = project_rotated(mesh, &vertices);
         let ids: Vec<Vec<u32>> = offsets
             .iter()
             .map(|&uv| rasterize(&tris, w, lay.ext, uv))
             .collect();
         let beta = sensor.bistatic_angle;
         let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
-        // only what is requested is kept (a profile-only batch holds no images)
-        let mut img = vec![0.0f32; if outputs.image { w * w * ch } else { 0 }];
-        let mut rng = vec![f32::NAN; if outputs.range { w * w } else { 0 }];
-        let mut cov = vec![0.0f32; if outputs.range { w * w } else { 0 }];
-        let mut prof = vec![0.0f64; if outputs.profile { nb * ch } else { 0 }];
-        let mut tot = vec![0.0f64; ch];
-        let mut weights = vec![0.0f64; nb];
-        for k in 0..w * w {
-            // a pixel none of whose samples sees the mesh adds nothing (analytic coverage
-            // also looks at the neighbours' centres)
-            if !sensor.analytic && ids.iter().all(|s_ids| s_ids[k] == 0) {
-                continue;
-            }
-            let (row, col) = (k / w, k % w);
-            let parts = if sensor.analytic {
-                analytic_parts(mesh, rot, &lay, &ids[0], row, col)
-            } else {
-                sampled_parts(&ids, &offsets, mesh.surfaces(), k)
+        let beam = Beam::new(sensor, &lay);
+        let mut acc = Accumulator::new(sensor, &lay, outputs);
+        // shade one part of pixel (row, col) into `px`; `corners`: the part's triangle's
+        // rotated corners
+        let shade_part = |acc: &mut Accumulator,
+                          px: &mut PixelAcc,
+                          part: &Part,
+                          corners: &[V3; 3],
+                          row: usize,
+                          col: usize| {
+            let tri = part.tri;
+            let x = -lay.ext + (col as f64 + part.centre[0]) * lay.pix;
+            let y = lay.ext - (row as f64 + part.centre[1]) * lay.pix;
+            let Some(mut s) = shade_at(mesh, rot, tri, corners, x, y, &beam, brdf) else {
+                return;
             };
-            let (mut cov_sum, mut r_sum) = (0.0f64, 0.0f64);
-            let mut pixel = [0.0f64; 16];
-            for part in &parts {
-                let tri = part.tri;
-                let x = -lay.ext + (col as f64 + part.centre[0]) * lay.pix;
-                let y = lay.ext - (row as f64 + part.centre[1]) * lay.pix;
-                let Some(mut s) = shade_point(mesh, rot, tri, x, y, &lay, beta, brdf) else {
+            // cast shadow: the point stays covered (range reported) but returns nothing
+            if let Some(tx) = &tx {
+                let lit = s.values.iter().any(|&v| v != 0.0);
+                if lit && shadowed(tx, tri, s.point) {
+                    s.values = [0.0; 16];
+                }
+            }
+            acc.add(px, part, &s, &edges);
+        };
+        {
+            let mut parts: Vec<Part> = Vec::with_capacity(sensor.samples);
+            for k in 0..w * w {
+                // a pixel none of whose samples sees the mesh adds nothing (analytic
+                // coverage also looks at the neighbours' centres)
+                if !sensor.analytic && ids.iter().all(|s_ids| s_ids[k] == 0) {
                     continue;
-                };
-                // cast shadow: the point stays covered (range reported) but returns nothing
-                if let Some(tx) = &tx {
-                    let lit = s.mueller.iter().flatten().any(|&v| v != 0.0);
-                    if lit && shadowed(tx, tri, s.point) {
-                        s.mueller = [[0.0; 4]; 4];
-                    }
                 }
-                let frac = part.frac;
-                cov_sum += frac;
-                r_sum += frac * s.range;
-                let mut vals = [0.0f64; 16];
-                for (c, v) in vals.iter_mut().enumerate().take(ch) {
-                    *v = match sensor.polarization {
-                        None => frac * s.mueller[c / 4][c % 4],
-                        Some(st) => frac * (0..4).map(|j| s.mueller[c][j] * st[j]).sum::<f64>(),
-                    };
+                let (row, col) = (k / w, k % w);
+                if sensor.analytic {
+                    parts = analytic_parts(mesh, rot, &lay, &ids[0], row, col);
+                } else {
+                    sampled_parts_into(&ids, &offsets, mesh.surfaces(), k, &mut parts);
                 }
-                for c in 0..ch {
-                    pixel[c] += vals[c];
+                let mut px = PixelAcc::default();
+                for part in &parts {
+                    // from the rotated vertices, not from `tris`: in pixel order they are
+                    // the smaller working set (and `project` drops back faces)
+                    let corners = mesh.faces[part.tri].map(|k| vertices[k as usize]);
+                    shade_part(&mut acc, &mut px, part, &corners, row, col);
                 }
-                if outputs.profile && vals[0] != 0.0 {
-                    // the footprint of the part of the pixel it spans (whole: 1)
-                    let (a, b) = (part.span[0] * s.widths.0, part.span[1] * s.widths.1);
-                    match &sensor.pulse {
-                        Some(p) => p.bin_weights(s.range, a, b, &edges, &mut weights),
-                        None => pulse::bin_weights_folded(
-                            s.range,
-                            a,
-                            b,
-                            sensor.sigma_range,
-                            lay.support + 0.5 * (a + b),
-                            &edges,
-                            &mut weights,
-                        ),
-                    }
-                    for (b, &wt) in weights.iter().enumerate() {
-                        if wt != 0.0 {
-                            for c in 0..ch {
-                                prof[b * ch + c] += wt * vals[c];
-                            }
-                        }
-                    }
-                }
-            }
-            if cov_sum > 0.0 && outputs.range {
-                rng[k] = (r_sum / cov_sum) as f32;
-                cov[k] = cov_sum as f32;
-            }
-            for c in 0..ch {
-                if outputs.image {
-                    img[k * ch + c] = pixel[c] as f32;
-                }
-                tot[c] += pixel[c];
+                acc.finish(k, &px);
             }
         }
-        (img, rng, prof, tot, cov)
+        (acc.img, acc.rng, acc.prof, acc.tot, acc.cov)
     };
     // attitudes in parallel (at most one per thread at a time), fewer at a time when that
     // many would exceed the memory budget
@@ -860,7 +1167,7 @@ pub fn render_reference(
 }
 
 /// The kernel's algorithm in f64 on the CPU with the GPU's BRDF tables (their f64
-/// originals, [`crate::brdf::table::BrdfTable::eval_dirs`]): what `Lidar(arithmetic="f64")`
+/// originals, looked up as the kernel does: [`Tables`]): what `Lidar(arithmetic="f64")`
 /// runs. Against `gpu::render` with the same tables only the arithmetic differs (and, when
 /// bistatic, the cast-shadow test: exact rays here, the kernel's shadow map there).
 pub fn render_tables(
@@ -868,10 +1175,9 @@ pub fn render_tables(
     sensor: &SensorSetup,
     rotations: &[Rot],
     outputs: Outputs,
-    tables: &[crate::brdf::table::BrdfTable],
+    tables: &[BrdfTable],
 ) -> Rendered {
-    let brdf = |m: usize, wi: V3, wo: V3| tables[m].eval_dirs(wi, wo);
-    render_supersampled(mesh, sensor, rotations, outputs, &brdf)
+    render_supersampled(mesh, sensor, rotations, outputs, &Tables(tables))
 }
 
 /// [`render_cpu`] at `sensor.supersampling` sub-pixels per pixel side, the images summed
@@ -881,7 +1187,7 @@ pub fn render_supersampled(
     sensor: &SensorSetup,
     rotations: &[Rot],
     outputs: Outputs,
-    brdf: &BrdfFn<'_>,
+    brdf: &(impl Brdf + ?Sized),
 ) -> Rendered {
     let mut r = render_cpu(mesh, sensor, rotations, outputs, brdf);
     let ss = sensor.supersampling;
@@ -939,6 +1245,69 @@ mod tests {
         // in between: as many as fit
         assert_eq!(attitudes_at_once(CPU_MEMORY_BUDGET / 3 + 1, 16), 2);
         assert_eq!(attitudes_at_once(1, 0), 1);
+    }
+
+    /// The twin's table lookup ([`Tables`]: the kernel's bisector coordinates and bases
+    /// from cross products, only the elements the output needs, double-angle Stokes
+    /// rotations) against the table's own evaluation in a local frame
+    /// ([`BrdfTable::eval_dirs`], all 16 elements, `change_bases` through Jones matrices):
+    /// the same numbers to rounding, for Mueller, Stokes and intensity outputs, monostatic
+    /// and bistatic, on a smooth sphere (every orientation of the normal).
+    #[test]
+    fn table_lookup_as_the_kernel_equals_the_tables_own_evaluation() {
+        use crate::brdf::table::BrdfTableOptions;
+        let mat = crate::render::gpu::twin_tests::metal();
+        let mesh = crate::render::gpu::tests::uv_sphere(0.5, 16, 32);
+        let rots = crate::render::gpu::tests::two_attitudes();
+        let all = Outputs {
+            image: true,
+            range: false,
+            profile: true,
+        };
+        let opts = BrdfTableOptions {
+            frame: Some(TableFrame::Bisector),
+            ..Default::default()
+        };
+        for beta in [0.0, 2f64.to_radians(), 0.3] {
+            let table = BrdfTable::build(&mat, beta, &opts).unwrap();
+            let by_dirs = |_: usize, wi: V3, wo: V3| table.eval_dirs(wi, wo);
+            let tables = [table.clone()];
+            for (pol, intensity_only) in [
+                (None, false),
+                (Some([1.0, 0.0, 0.0, 0.0]), false),
+                (Some([1.0, 0.3, -0.5, 0.4]), false),
+                (Some([1.0, 0.0, 0.0, 0.0]), true),
+                (Some([1.0, 0.6, 0.2, -0.7]), true),
+            ] {
+                let mut sensor = crate::render::gpu::tests::lambert_sensor(40);
+                sensor.bistatic_angle = beta;
+                sensor.polarization = pol;
+                sensor.intensity_only = intensity_only;
+                let a = render_cpu(&mesh, &sensor, &rots, all, &Tables(&tables));
+                let b = render_cpu(&mesh, &sensor, &rots, all, &by_dirs);
+                let (ia, ib) = (a.image.unwrap(), b.image.unwrap());
+                let peak = ib.iter().fold(0.0f32, |m, &v| m.max(v.abs()));
+                assert!(peak > 0.0 && ib.iter().filter(|&&v| v != 0.0).count() > 500);
+                // images in f32: within two roundings of the larger value
+                for (x, y) in ia.iter().zip(&ib) {
+                    let tol = 2.5e-7 * x.abs().max(y.abs()) + 1e-12 * peak;
+                    assert!((x - y).abs() <= tol, "beta {beta} {pol:?}: {x} vs {y}");
+                }
+                let scale = b.total[0].abs();
+                for (x, y) in a.total.iter().zip(&b.total).chain(
+                    a.profile
+                        .as_ref()
+                        .unwrap()
+                        .iter()
+                        .zip(b.profile.as_ref().unwrap()),
+                ) {
+                    assert!(
+                        (x - y).abs() <= 1e-10 * scale,
+                        "beta {beta} {pol:?}: {x} vs {y}"
+                    );
+                }
+            }
+        }
     }
 
     /// Back faces of a closed, outward-wound mesh are never the nearest hit: culling them
