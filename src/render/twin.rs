@@ -17,6 +17,7 @@ use crate::optics::frames::{beam_bases, cross, dot, normalize, Frame, V3};
 use crate::optics::mueller::Mat4;
 use rayon::prelude::*;
 use std::f64::consts::PI;
+use std::ops::Range;
 
 /// Triangle index + 1 seen at each pixel centre (0: empty), row-major `width x width`.
 /// Ties (a centre on a shared edge) may resolve differently from the GPU's rasterizer.
@@ -943,6 +944,9 @@ pub fn attitudes_at_once(bytes: usize, threads: usize) -> usize {
     (CPU_MEMORY_BUDGET / bytes.max(1)).clamp(1, threads.max(1))
 }
 
+/// Rows of an attitude's image per block of [`render_cpu`]'s work.
+const ROWS_PER_BLOCK: usize = 8;
+
 /// One pixel's sums over its parts: covered fraction, fraction-weighted range, values.
 #[derive(Default)]
 struct PixelAcc {
@@ -955,6 +959,8 @@ struct PixelAcc {
 struct Accumulator<'a> {
     sensor: &'a SensorSetup,
     outputs: Outputs,
+    /// The first pixel's index: the images hold pixels `first..`.
+    first: usize,
     ch: usize,
     support: f64,
     img: Vec<f32>,
@@ -967,11 +973,13 @@ struct Accumulator<'a> {
 }
 
 impl<'a> Accumulator<'a> {
-    fn new(sensor: &'a SensorSetup, lay: &Layout, outputs: Outputs) -> Self {
-        let (n, ch, nb) = (lay.width * lay.width, sensor.channels(), lay.n_bins);
+    /// For the pixels `pixels` (row-major indices) of one attitude.
+    fn new(sensor: &'a SensorSetup, lay: &Layout, outputs: Outputs, pixels: Range<usize>) -> Self {
+        let (n, ch, nb) = (pixels.len(), sensor.channels(), lay.n_bins);
         Accumulator {
             sensor,
             outputs,
+            first: pixels.start,
             ch,
             support: lay.support,
             img: vec![0.0; if outputs.image { n * ch } else { 0 }],
@@ -1020,7 +1028,7 @@ impl<'a> Accumulator<'a> {
 
     /// Write pixel `k`'s sums to the images and the totals.
     fn finish(&mut self, k: usize, px: &PixelAcc) {
-        let ch = self.ch;
+        let (ch, k) = (self.ch, k - self.first);
         if px.cov > 0.0 && self.outputs.range {
             self.rng[k] = (px.range / px.cov) as f32;
             self.cov[k] = px.cov as f32;
@@ -1031,6 +1039,26 @@ impl<'a> Accumulator<'a> {
             }
             self.tot[c] += px.values[c];
         }
+    }
+
+    /// One attitude's outputs `(image, range, profile, total, coverage)` from the
+    /// accumulators of consecutive pixel ranges, the sums added in their order.
+    #[allow(clippy::type_complexity)]
+    fn concat(blocks: Vec<Self>) -> (Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>) {
+        let mut it = blocks.into_iter();
+        let mut a = it.next().expect("at least one block");
+        for b in it {
+            a.img.extend(b.img);
+            a.rng.extend(b.rng);
+            a.cov.extend(b.cov);
+            for (x, y) in a.prof.iter_mut().zip(&b.prof) {
+                *x += y;
+            }
+            for (x, y) in a.tot.iter_mut().zip(&b.tot) {
+                *x += y;
+            }
+        }
+        (a.img, a.rng, a.prof, a.tot, a.cov)
     }
 }
 
@@ -1050,80 +1078,107 @@ pub fn render_cpu(
     let edges: Vec<f64> = (0..=nb)
         .map(|k| lay.r_min + k as f64 * sensor.bin_width)
         .collect();
-    let render_one = |rot: &Rot| {
-        let offsets = super::gpu::sample_offsets(sensor.samples);
+    let offsets = super::gpu::sample_offsets(sensor.samples);
+    let beta = sensor.bistatic_angle;
+    let beam = Beam::new(sensor, &lay);
+    // per attitude: the rotated vertices, the visibility samples' id maps (in parallel
+    // when the attitudes are not) and the transmitter's view (bistatic)
+    let prepare = |rot: &Rot, in_parallel: bool| {
         let vertices = rotate_vertices(mesh, rot);
         let tris = project_rotated(mesh, &vertices);
-        let ids: Vec<Vec<u32>> = offsets
-            .iter()
-            .map(|&uv| rasterize(&tris, w, lay.ext, uv))
-            .collect();
-        let beta = sensor.bistatic_angle;
-        let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
-        let beam = Beam::new(sensor, &lay);
-        let mut acc = Accumulator::new(sensor, &lay, outputs);
-        // shade one part of pixel (row, col) into `px`; `corners`: the part's triangle's
-        // rotated corners
-        let shade_part = |acc: &mut Accumulator,
-                          px: &mut PixelAcc,
-                          part: &Part,
-                          corners: &[V3; 3],
-                          row: usize,
-                          col: usize| {
-            let tri = part.tri;
-            let x = -lay.ext + (col as f64 + part.centre[0]) * lay.pix;
-            let y = lay.ext - (row as f64 + part.centre[1]) * lay.pix;
-            let Some(mut s) = shade_at(mesh, rot, tri, corners, x, y, &beam, brdf) else {
-                return;
-            };
-            // cast shadow: the point stays covered (range reported) but returns nothing
-            if let Some(tx) = &tx {
-                let lit = s.values.iter().any(|&v| v != 0.0);
-                if lit && shadowed(tx, tri, s.point) {
-                    s.values = [0.0; 16];
-                }
-            }
-            acc.add(px, part, &s, &edges);
+        let ids: Vec<Vec<u32>> = if in_parallel {
+            offsets
+                .par_iter()
+                .map(|&uv| rasterize(&tris, w, lay.ext, uv))
+                .collect()
+        } else {
+            offsets
+                .iter()
+                .map(|&uv| rasterize(&tris, w, lay.ext, uv))
+                .collect()
         };
-        {
-            let mut parts: Vec<Part> = Vec::with_capacity(sensor.samples);
-            for k in 0..w * w {
-                // a pixel none of whose samples sees the mesh adds nothing (analytic
-                // coverage also looks at the neighbours' centres)
-                if !sensor.analytic && ids.iter().all(|s_ids| s_ids[k] == 0) {
-                    continue;
-                }
-                let (row, col) = (k / w, k % w);
-                if sensor.analytic {
-                    parts = analytic_parts(mesh, rot, &lay, &ids[0], row, col);
-                } else {
-                    sampled_parts_into(&ids, &offsets, mesh.surfaces(), k, &mut parts);
-                }
-                let mut px = PixelAcc::default();
-                for part in &parts {
-                    // from the rotated vertices, not from `tris`: in pixel order they are
-                    // the smaller working set (and `project` drops back faces)
-                    let corners = mesh.faces[part.tri].map(|k| vertices[k as usize]);
-                    shade_part(&mut acc, &mut px, part, &corners, row, col);
-                }
-                acc.finish(k, &px);
-            }
-        }
-        (acc.img, acc.rng, acc.prof, acc.tot, acc.cov)
+        let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
+        (vertices, ids, tx)
     };
-    // attitudes in parallel (at most one per thread at a time), fewer at a time when that
-    // many would exceed the memory budget
+    // shade the pixels of rows `rows` of an attitude
+    let shade_rows = |rot: &Rot,
+                      (vertices, ids, tx): &(Vec<V3>, Vec<Vec<u32>>, Option<TransmitterView>),
+                      rows: &Range<usize>| {
+        let mut acc = Accumulator::new(sensor, &lay, outputs, rows.start * w..rows.end * w);
+        let mut parts: Vec<Part> = Vec::with_capacity(sensor.samples);
+        for k in rows.start * w..rows.end * w {
+            // a pixel none of whose samples sees the mesh adds nothing (analytic coverage
+            // also looks at the neighbours' centres)
+            if !sensor.analytic && ids.iter().all(|s_ids| s_ids[k] == 0) {
+                continue;
+            }
+            let (row, col) = (k / w, k % w);
+            if sensor.analytic {
+                parts = analytic_parts(mesh, rot, &lay, &ids[0], row, col);
+            } else {
+                sampled_parts_into(ids, &offsets, mesh.surfaces(), k, &mut parts);
+            }
+            let mut px = PixelAcc::default();
+            for part in &parts {
+                let tri = part.tri;
+                let x = -lay.ext + (col as f64 + part.centre[0]) * lay.pix;
+                let y = lay.ext - (row as f64 + part.centre[1]) * lay.pix;
+                // from the rotated vertices, not from `project`'s triangles: in pixel order
+                // they are the smaller working set (and `project` drops back faces)
+                let corners = mesh.faces[tri].map(|k| vertices[k as usize]);
+                let Some(mut s) = shade_at(mesh, rot, tri, &corners, x, y, &beam, brdf) else {
+                    continue;
+                };
+                // cast shadow: the point stays covered (range reported) but returns nothing
+                if let Some(tx) = tx {
+                    let lit = s.values.iter().any(|&v| v != 0.0);
+                    if lit && shadowed(tx, tri, s.point) {
+                        s.values = [0.0; 16];
+                    }
+                }
+                acc.add(&mut px, part, &s, &edges);
+            }
+            acc.finish(k, &px);
+        }
+        acc
+    };
+    // an attitude's rows in fixed blocks (not one per thread), summed in their order: the
+    // same sums in any batch, on any number of threads
+    let blocks: Vec<Range<usize>> = (0..w)
+        .step_by(ROWS_PER_BLOCK)
+        .map(|r| r..(r + ROWS_PER_BLOCK).min(w))
+        .collect();
+    let render_one = |rot: &Rot, in_parallel: bool| {
+        let prep = prepare(rot, in_parallel);
+        let accs: Vec<Accumulator> = if in_parallel {
+            blocks
+                .par_iter()
+                .map(|r| shade_rows(rot, &prep, r))
+                .collect()
+        } else {
+            blocks.iter().map(|r| shade_rows(rot, &prep, r)).collect()
+        };
+        Accumulator::concat(accs)
+    };
+    // attitudes in parallel when there are enough of them and that many fit the memory
+    // budget; otherwise at most as many at a time as fit, each one's visibility samples
+    // and row blocks in parallel
     let threads = rayon::current_num_threads();
     let at_once = attitudes_at_once(attitude_bytes(w, sensor.samples, ch, nb, outputs), threads);
     #[allow(clippy::type_complexity)]
-    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>)> = if at_once >= threads {
-        rotations.par_iter().map(render_one).collect()
-    } else {
-        rotations
-            .chunks(at_once)
-            .flat_map(|c| c.par_iter().map(render_one).collect::<Vec<_>>())
-            .collect()
-    };
+    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>)> =
+        if at_once >= threads && rotations.len() >= threads {
+            rotations.par_iter().map(|r| render_one(r, false)).collect()
+        } else {
+            rotations
+                .chunks(at_once)
+                .flat_map(|c| {
+                    c.par_iter()
+                        .map(|r| render_one(r, true))
+                        .collect::<Vec<_>>()
+                })
+                .collect()
+        };
     let n = rotations.len();
     let cov: Vec<f32> = per.iter().flat_map(|p| p.4.iter().copied()).collect();
     Rendered {
@@ -1307,6 +1362,63 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// An attitude renders to the same bits alone (its row blocks in parallel) and in a
+    /// batch (attitudes in parallel, each one's blocks in turn): the blocks are fixed and
+    /// summed in their order.
+    #[test]
+    fn an_attitude_renders_the_same_alone_and_in_a_batch() {
+        let mesh = crate::render::gpu::tests::uv_sphere(0.5, 16, 32);
+        let q = |a: f64| {
+            [
+                (0.5 * a).cos(),
+                0.6 * (0.5 * a).sin(),
+                0.8 * (0.5 * a).sin(),
+                0.0,
+            ]
+        };
+        let quats: Vec<[f64; 4]> = (0..8).map(|k| q(0.4 * k as f64)).collect();
+        let rots = crate::render::geometry::rotations_from_quaternions(&quats).unwrap();
+        let brdf = |_: usize, wi: V3, wo: V3| {
+            let mut m = [[0.0; 4]; 4];
+            m[0][0] = 0.2 / PI * (1.0 + wi[0] * wo[0]);
+            m[1][1] = 0.1 * wo[2];
+            m
+        };
+        let all = Outputs {
+            image: true,
+            range: true,
+            profile: true,
+        };
+        let mut sensor = crate::render::gpu::tests::lambert_sensor(40);
+        sensor.samples = 4;
+        sensor.bistatic_angle = 0.2;
+        let batch = render_cpu(&mesh, &sensor, &rots, all, &brdf);
+        let (n_img, n_px, n_prof) = (40 * 40 * 16, 40 * 40, batch.n_bins * 16);
+        for (a, rot) in rots.iter().enumerate() {
+            let one = render_cpu(&mesh, &sensor, std::slice::from_ref(rot), all, &brdf);
+            let bits32 = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let bits64 = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let (bi, oi) = (batch.image.as_ref().unwrap(), one.image.unwrap());
+            assert!(
+                bits32(&bi[a * n_img..(a + 1) * n_img]) == bits32(&oi),
+                "image {a}"
+            );
+            let (br, or) = (batch.range.as_ref().unwrap(), one.range.unwrap());
+            assert!(
+                bits32(&br[a * n_px..(a + 1) * n_px]) == bits32(&or),
+                "range {a}"
+            );
+            let (bp, op) = (batch.profile.as_ref().unwrap(), one.profile.unwrap());
+            assert!(
+                bits64(&bp[a * n_prof..(a + 1) * n_prof]) == bits64(&op),
+                "profile {a}"
+            );
+            let bt = &batch.total[a * 16..(a + 1) * 16];
+            assert!(bits64(bt) == bits64(&one.total), "total {a}");
+            assert!(one.total[0] > 0.0);
         }
     }
 
