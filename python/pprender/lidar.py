@@ -225,7 +225,8 @@ class Lidar:
     3e-5 of a pixel's M00, half the tables' own interpolation error, and 1e-6 to 1e-4 of
     a profile, growing with the pixel's range footprint (docs/tradeoff.md measures both).
     It is also a native CPU renderer: on a machine without a GPU it can be faster than
-    lavapipe (1.4x to 2x on 2 cores here, docs/render-benchmark.md); on a GPU ``"f32"`` is
+    lavapipe (1.3x for profiles, 4x to 5x for images on 2 cores here,
+    docs/render-benchmark.md, docs/equal-error.md); on a GPU ``"f32"`` is
     the choice. ``quality="reference"`` is f64 already (``arithmetic`` unset or ``"f64"``).
     ``intensity_only``: with a ``polarization``, compute only the received intensity ``S0``
     (``"intensity"`` images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel
