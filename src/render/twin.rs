@@ -83,27 +83,11 @@ fn pixel_box(p: &[V3; 3], width: usize, ext: f64, uv: [f64; 2]) -> Option<[usize
         p[0][1].min(p[1][1]).min(p[2][1]),
         p[0][1].max(p[1][1]).max(p[2][1]),
     );
-    let last = width as isize - 1;
-    let j0 = ceil((xmin + ext) / pix - u).max(0);
-    let j1 = floor((xmax + ext) / pix - u).min(last);
-    let i0 = ceil((ext - ymax) / pix - v).max(0);
-    let i1 = floor((ext - ymin) / pix - v).min(last);
-    (j1 >= 0 && i1 >= 0).then_some([i0 as usize, i1 as usize, j0 as usize, j1 as usize])
-}
-
-/// `x.floor()` as an integer for `|x| < 2^53` (saturating beyond; a NaN gives 0), by
-/// truncation: `f64::floor` is a libm call on baseline x86-64.
-#[inline]
-fn floor(x: f64) -> isize {
-    let t = x as isize;
-    t - ((x < t as f64) as isize)
-}
-
-/// `x.ceil()` as an integer, as [`floor`].
-#[inline]
-fn ceil(x: f64) -> isize {
-    let t = x as isize;
-    t + ((x > t as f64) as isize)
+    let j0 = ((xmin + ext) / pix - u).ceil().max(0.0) as usize;
+    let j1 = ((xmax + ext) / pix - u).floor().min(width as f64 - 1.0) as isize;
+    let i0 = ((ext - ymax) / pix - v).ceil().max(0.0) as usize;
+    let i1 = ((ext - ymin) / pix - v).floor().min(width as f64 - 1.0) as isize;
+    (j1 >= 0 && i1 >= 0).then_some([i0, i1 as usize, j0, j1 as usize])
 }
 
 /// Triangle index + 1 nearest the telescope at the point `(u, v)` of each pixel (as
