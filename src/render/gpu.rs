@@ -2520,12 +2520,13 @@ mod coverage_tests {
             }
             // pixels where the candidate search overflows (the centre-sample fallback)
             let ids = twin::visibility(&mesh, &rots[0], lay.width, lay.ext);
+            let vertices = twin::rotate_vertices(&mesh, &rots[0]);
             for p in 0..lay.width * lay.width {
                 let (row, col) = (p / lay.width, p % lay.width);
                 let w = lay.width;
                 let (seeds, _) = twin::analytic_seeds(&ids, w, row, col);
                 if !seeds.is_empty()
-                    && twin::coverage_parts(&mesh, &rots[0], &lay, row, col, &seeds).is_none()
+                    && twin::coverage_parts(&mesh, &vertices, &lay, row, col, &seeds).is_none()
                 {
                     n_fallback += 1;
                 }

@@ -720,10 +720,11 @@ fn moments(p: &Poly) -> [f64; 3] {
 /// those overlapping the pixel (at most `MAX_CAND`) are clipped to it; a visible part is
 /// the clip minus every other candidate that overlaps it and is nearer at the centroid of
 /// their overlap (ties: the lower index), at most `MAX_PIECES` convex pieces kept. `None` when more than `MAX_QUEUE`
-/// triangles were to be examined or more than `MAX_CAND` overlap the pixel.
+/// triangles were to be examined or more than `MAX_CAND` overlap the pixel. `vertices`: the
+/// mesh's vertices at the attitude ([`rotate_vertices`]).
 pub fn coverage_parts(
     mesh: &Mesh,
-    rot: &Rot,
+    vertices: &[V3],
     lay: &Layout,
     row: usize,
     col: usize,
@@ -739,7 +740,7 @@ pub fn coverage_parts(
     let mut qi = 0;
     while qi < queue.len() {
         let t = queue[qi];
-        let p = mesh.faces[t].map(|k| rotate(rot, mesh.vertices[k as usize]));
+        let p = mesh.faces[t].map(|k| vertices[k as usize]);
         let uv = p.map(|v| [(v[0] - x0) / lay.pix, (y0 - v[1]) / lay.pix]);
         let e1 = [uv[1][0] - uv[0][0], uv[1][1] - uv[0][1]];
         let e2 = [uv[2][0] - uv[0][0], uv[2][1] - uv[0][1]];
@@ -863,10 +864,11 @@ pub fn analytic_seeds(ids: &[u32], width: usize, row: usize, col: usize) -> (Vec
 /// A pixel's parts under analytic coverage from the centre id map `ids` (`width x width`):
 /// the seeds are the distinct triangles seen at the centres of its 3x3 neighbourhood (scan
 /// order); one triangle at all nine contains their hull and so is the whole pixel, shaded
-/// at its centre; else [`coverage_parts`], or the centre sample alone where that overflows.
+/// at its centre; else [`coverage_parts`], or the centre sample alone where that overflows
+/// (`vertices` as there).
 pub fn analytic_parts(
     mesh: &Mesh,
-    rot: &Rot,
+    vertices: &[V3],
     lay: &Layout,
     ids: &[u32],
     row: usize,
@@ -881,7 +883,7 @@ pub fn analytic_parts(
             span: [1.0, 1.0],
         }];
     }
-    coverage_parts(mesh, rot, lay, row, col, &cand).unwrap_or_else(|| {
+    coverage_parts(mesh, vertices, lay, row, col, &cand).unwrap_or_else(|| {
         // too many triangles: the centre sample, as with one sample per pixel
         match ids[row * lay.width + col] {
             0 => vec![],
@@ -1098,7 +1100,7 @@ pub fn render_cpu(
             }
             let (row, col) = (k / w, k % w);
             if sensor.analytic {
-                parts = analytic_parts(mesh, rot, &lay, &ids[0], row, col);
+                parts = analytic_parts(mesh, vertices, &lay, &ids[0], row, col);
             } else {
                 sampled_parts_into(ids, &offsets, mesh.surfaces(), k, &mut parts);
             }
