@@ -13,7 +13,7 @@ use super::geometry::{rotate, transmitter_rotation, Mesh, Rot};
 use super::gpu::{Layout, Outputs, Rendered, SensorSetup};
 use super::pulse;
 use crate::brdf::table::{BrdfTable, TableFrame};
-use crate::optics::frames::{beam_bases, cross, dot, normalize, Frame, V3};
+use crate::optics::frames::{beam_bases, cross, dot, neg, norm, normalize, Frame, V3};
 use crate::optics::mueller::Mat4;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -159,15 +159,11 @@ pub trait Brdf: Sync {
 }
 
 /// `brdf(material, wi_local, wo_local)`: the Mueller BRDF in the `Sp` frame of a local
-/// frame with `n = z` (its tangents from a fixed helper axis), all elements.
+/// frame with `n = z` (its tangents from a fixed helper axis: `t1 = -any_perp(n)`), all
+/// elements.
 impl<F: Fn(usize, V3, V3) -> Mat4 + Sync> Brdf for F {
     fn eval_framed(&self, mat: usize, n: V3, wi: V3, wo: V3, _mask: u32) -> Framed {
-        let helper = if n[0].abs() < 0.9 {
-            [1.0, 0.0, 0.0]
-        } else {
-            [0.0, 1.0, 0.0]
-        };
-        let t1 = normalize(cross(helper, n));
+        let t1 = neg(any_perp(n));
         let t2 = cross(n, t1);
         let to_local = |v: V3| [dot(v, t1), dot(v, t2), dot(v, n)];
         let to_world = |v: V3| {
@@ -205,7 +201,7 @@ impl Brdf for Tables<'_> {
         let b = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
         let cos_t = dot(n, b).clamp(0.0, 1.0);
         let nxb = cross(n, b);
-        let sin_t = dot(nxb, nxb).sqrt();
+        let sin_t = norm(nxb);
         let e_phi = if sin_t > 0.0 {
             [nxb[0] / sin_t, nxb[1] / sin_t, nxb[2] / sin_t]
         } else {
