@@ -66,12 +66,16 @@ override SAMPLES: u32 = 1u;
 // the triangles seen at the centres of its 3x3 neighbourhood by exact polygon clipping in
 // depth order (see cs_main and coverage_parts).
 override COVERAGE: bool = false;
+// Some material's single term is evaluated here instead of looked up (single_in_shader;
+// its part's n_psi header word is SHADER_PART): compiled out when no material needs it.
+override SINGLE_IN_SHADER: bool = false;
 
 const PI: f32 = 3.14159265358979;
 const MAX_PARTS: u32 = 3u;
 const HEADER_WORDS: u32 = 12u;
 const LN_FLOOR_F32: f32 = -87.0;
 const SHADOW_EPS: f32 = 1e-5;      // cast shadows: eps_z = SHADOW_EPS ext
+const SHADER_PART: u32 = 0xffffffffu;
 
 struct Params {
     width: u32,
@@ -225,6 +229,210 @@ fn add_part(m: u32, p: u32, z: f32, psi: f32, w: f32, acc: ptr<function, array<f
     for (var e = 1u; e < 16u; e++) {
         if (((ELEMENT_MASK >> e) & 1u) != 0u) {
             (*acc)[e] += m00 * clamp(vals[e], -1.0, 1.0);
+        }
+    }
+}
+
+// ---- the single term evaluated in the kernel (SINGLE_IN_SHADER; twin: SingleParams::eval
+// in src/brdf/table.rs, through BrdfTable::eval_masked) ----
+// The material's words at `blk` (SingleParams::words): distribution kind and m or alpha,
+// perfect-conductor flag, n - 1 and k, the masking-excess table (scale, correlation kind,
+// intervals, values). All vectors are in the telescope frame.
+
+fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
+}
+
+// a / b, scaled by b's larger component so that |b|^2 neither overflows nor underflows
+fn cdiv(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    let s = max(abs(b.x), abs(b.y));
+    let bs = b / s;
+    let an = a / s;
+    return vec2<f32>(an.x * bs.x + an.y * bs.y, an.y * bs.x - an.x * bs.y) / dot(bs, bs);
+}
+
+// Principal square root, Kahan's algebraic form (as optics::fresnel::csqrt).
+fn csqrt(z: vec2<f32>) -> vec2<f32> {
+    if (z.x == 0.0 && z.y == 0.0) {
+        return z;
+    }
+    let t = sqrt(0.5 * (length(z) + abs(z.x)));
+    if (z.x >= 0.0) {
+        return vec2<f32>(t, z.y / (2.0 * t));
+    }
+    return vec2<f32>(abs(z.y) / (2.0 * t), select(t, -t, z.y < 0.0));
+}
+
+// (rs, rp) at incidence cosine c for eta = 1 + nm1 + i k (optics::fresnel): the
+// cancellation-free numerators, eta^2 - 1 = (eta - 1)(eta + 1).
+fn fresnel_rs_rp(c: f32, nm1: f32, k: f32, pec: bool) -> vec4<f32> {
+    if (pec) {
+        return vec4<f32>(-1.0, 0.0, 1.0, 0.0);
+    }
+    let e2m1 = cmul(vec2<f32>(nm1, k), vec2<f32>(nm1 + 2.0, k));
+    let w = csqrt(e2m1 + vec2<f32>(c * c, 0.0));
+    let ds = vec2<f32>(c, 0.0) + w;
+    let dp = (e2m1 + vec2<f32>(1.0, 0.0)) * c + w;
+    if (all(ds == vec2<f32>(0.0)) || all(dp == vec2<f32>(0.0))) {
+        return vec4<f32>(0.0);
+    }
+    let rs = -cdiv(e2m1, cmul(ds, ds));
+    let rp = cdiv(cmul(e2m1, (e2m1 + vec2<f32>(2.0, 0.0)) * (c * c) - vec2<f32>(1.0, 0.0)),
+                  cmul(dp, dp));
+    return vec4<f32>(rs, rp);
+}
+
+// D(h) from cos(theta_h) > 0 and sin^2(theta_h) (microfacet::Distribution::d).
+fn ndf(kind: u32, r: f32, cos_h: f32, sin2_h: f32) -> f32 {
+    if (cos_h <= 0.0) {
+        return 0.0;
+    }
+    if (kind == 0u) { // Blinn-Phong, exponent r
+        if (r == 0.0) {
+            return 1.0 / PI;
+        }
+        // ln cos = ln(1 - sin^2) / 2 by its series where cos is near 1
+        var ln_cos: f32;
+        if (sin2_h < 0.01) {
+            let x = sin2_h;
+            ln_cos = -0.5 * x * (1.0 + x * (0.5 + x * (0.33333334 + x * 0.25)));
+        } else {
+            ln_cos = log(cos_h);
+        }
+        return (r + 2.0) / (2.0 * PI) * exp(max(r * ln_cos, LN_FLOOR_F32 - 16.0));
+    }
+    let a2 = r * r;
+    let c2 = cos_h * cos_h;
+    if (kind == 1u) { // Beckmann
+        let e = -sin2_h / (c2 * a2);
+        if (e < LN_FLOOR_F32) {
+            return 0.0;
+        }
+        return exp(e) / (PI * a2 * c2 * c2);
+    }
+    let t = a2 * c2 + sin2_h; // GGX
+    return a2 / (PI * t * t);
+}
+
+// The masking excess N at (cos, sin) from the material's 1D table (ZTable::eval_z).
+fn excess(blk: u32, c: f32, s: f32) -> f32 {
+    let scale = tables[blk + 5u];
+    let n = bitcast<u32>(tables[blk + 7u]);
+    let z = clamp(c / max(scale * s + c, 1e-30), 0.0, 1.0);
+    let x = z * f32(n);
+    let i = min(u32(x), n - 1u);
+    let t = x - f32(i);
+    let v = blk + 8u;
+    let p1 = tables[v + i];
+    let p2 = tables[v + i + 1u];
+    var p0: f32;
+    if (i > 0u) {
+        p0 = tables[v + i - 1u];
+    } else {
+        p0 = 3.0 * p1 - 3.0 * p2 + tables[v + min(i + 2u, n)];
+    }
+    var p3: f32;
+    if (i + 2u <= n) {
+        p3 = tables[v + i + 2u];
+    } else {
+        p3 = 3.0 * p2 - 3.0 * p1 + tables[v + max(i, 1u) - 1u];
+    }
+    return max(catmull_rom(p0, p1, p2, p3, t), 0.0);
+}
+
+// Adds the single term times cos(theta_i), M cos_i = D F (G / cos_o) / 4 (in the beam
+// bases x_in, x_out; y = k x x), at the unit normal n for wi, wo above it, to acc (the
+// elements in ELEMENT_MASK). G / cos_o is formed without dividing by cos_i, so that it
+// stays finite at grazing incidence: (1 - f) P_i Q_o + f min(P_i, P_o) / cos_o, Q = P / cos.
+fn add_single_in_shader(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_in: vec3<f32>,
+                        x_out: vec3<f32>, acc: ptr<function, array<f32, 16>>) {
+    let h = safe_normalize(wi + wo, n);
+    let nxh = cross(n, h);
+    let d = ndf(bitcast<u32>(tables[blk]), tables[blk + 1u], dot(n, h), dot(nxh, nxh));
+    if (!(d > 0.0)) {
+        return;
+    }
+    let ci = dot(n, wi);
+    let co = dot(n, wo);
+    // horizontal parts by cross products (accurate near the normal; n x w has length sin)
+    let ui = cross(n, wi);
+    let uo = cross(n, wo);
+    let si = length(ui);
+    let so = length(uo);
+    let qi = 1.0 / (ci + excess(blk, ci, si));
+    let qo = 1.0 / (co + excess(blk, co, so));
+    let corr = bitcast<u32>(tables[blk + 6u]);
+    var f = 0.0;
+    if (corr != 0u) {
+        f = 1.0;
+        if (si > 0.0 && so > 0.0) {
+            let cos_phi = clamp(dot(ui, uo) / (si * so), -1.0, 1.0);
+            if (corr == 1u) {
+                f = sqrt(max(0.5 * (1.0 + cos_phi), 0.0));
+            } else {
+                let phi = acos(cos_phi);
+                f = exp(-7.3 * phi * phi);
+            }
+        }
+    }
+    let p_i = ci * qi;
+    let p_o = co * qo;
+    let g_ci = (1.0 - f) * p_i * qo + f * select(qo, p_i / co, p_i <= p_o);
+    let r = fresnel_rs_rp(clamp(dot(wi, h), 0.0, 1.0), tables[blk + 3u], tables[blk + 4u],
+                          bitcast<u32>(tables[blk + 2u]) != 0u);
+    let rs = r.xy;
+    let rp = r.zw;
+    // the facet's s/p basis (brdf::single::facet_sp_basis): s = normalize(k_in x h)
+    let k_in = -wi;
+    let y_in = cross(k_in, x_in);
+    let y_out = cross(wo, x_out);
+    let c = cross(k_in, h);
+    let sv = select(x_in, normalize(c), dot(c, c) > 1e-12);
+    let p_in = cross(k_in, sv);
+    let p_out = cross(wo, sv);
+    let sxi = dot(sv, x_in);
+    let syi = dot(sv, y_in);
+    let pxi = dot(p_in, x_in);
+    let pyi = dot(p_in, y_in);
+    let sxo = dot(sv, x_out);
+    let syo = dot(sv, y_out);
+    let pxo = dot(p_out, x_out);
+    let pyo = dot(p_out, y_out);
+    // Jones columns c0 = (ja, jb), c1 = (jc, jd)
+    let ja = rs * (sxo * sxi) + rp * (pxo * pxi);
+    let jc = rs * (sxo * syi) + rp * (pxo * pyi);
+    let jb = rs * (syo * sxi) + rp * (pyo * pxi);
+    let jd = rs * (syo * syi) + rp * (pyo * pyi);
+    // Jones to Mueller (optics::mueller::jones_to_mueller)
+    let aa = dot(ja, ja);
+    let bb = dot(jb, jb);
+    let cc = dot(jc, jc);
+    let dd = dot(jd, jd);
+    let conj = vec2<f32>(1.0, -1.0);
+    let ab = cmul(ja, jb * conj);
+    let cd = cmul(jc, jd * conj);
+    let ad = cmul(ja, jd * conj);
+    let cb = cmul(jc, jb * conj);
+    let ac = cmul(ja, jc * conj);
+    let bd = cmul(jb, jd * conj);
+    let diff = ad - cb;
+    // H_j as (h00, h11, h01) for the four columns
+    let h00 = vec4<f32>(aa + cc, aa - cc, 2.0 * ac.x, -2.0 * ac.y);
+    let h11 = vec4<f32>(bb + dd, bb - dd, 2.0 * bd.x, -2.0 * bd.y);
+    let sum = ad + cb;
+    let h01_re = vec4<f32>(ab.x + cd.x, ab.x - cd.x, sum.x, -diff.y);
+    let h01_im = vec4<f32>(ab.y + cd.y, ab.y - cd.y, sum.y, diff.x);
+    let scale = 0.25 * d * g_ci;
+    var m: array<f32, 16>;
+    for (var j = 0u; j < 4u; j++) {
+        m[j] = 0.5 * (h00[j] + h11[j]);
+        m[4u + j] = 0.5 * (h00[j] - h11[j]);
+        m[8u + j] = h01_re[j];
+        m[12u + j] = h01_im[j];
+    }
+    for (var e = 0u; e < 16u; e++) {
+        if (e == 0u || ((ELEMENT_MASK >> e) & 1u) != 0u) {
+            (*acc)[e] += scale * m[e];
         }
     }
 }
@@ -743,6 +951,11 @@ fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32
             let x_out = safe_normalize(e_phi - dot(e_phi, wo) * wo, any_perp(wo));
             let y_in = cross(k_in, x_in);
             let y_out = cross(wo, x_out);
+            // the single term evaluated here (the table's parts hold the others)
+            if (SINGLE_IN_SHADER && bitcast<u32>(tables[mat * HEADER_WORDS + 2u]) == SHADER_PART) {
+                add_single_in_shader(bitcast<u32>(tables[mat * HEADER_WORDS]), n, wi, wo, x_in,
+                                     x_out, &m);
+            }
             // telescope bases: x_in_t = normalize(k_in x Y), x_out_t = X (wo = Z)
             let x_in_t = normalize(cross(k_in, vec3<f32>(0.0, 1.0, 0.0)));
             let y_in_t = cross(k_in, x_in_t);

@@ -819,10 +819,13 @@ F32_PHYS_TOL = 1e-6
 RENDER_RTOL = 1e-4
 
 
+@pytest.mark.parametrize("brdf", ["table", "shader"])
 @pytest.mark.parametrize("geometry", list(RENDER_GEOMETRY))
 @pytest.mark.parametrize("name", list(RENDER_MATERIALS))
-def test_render_extremes_against_the_f64_reference(name: str, geometry: str) -> None:
-    """The f32 GPU table path (lavapipe without a GPU) against quality="reference" (exact
+def test_render_extremes_against_the_f64_reference(name: str, geometry: str, brdf: str) -> None:
+    """The f32 GPU path (lavapipe without a GPU), with the tables (``brdf="table"``) and
+    with the single term evaluated in the kernel (``"shader"``; its accumulator bound has a
+    margin of 4, SHADER_PART_MARGIN, so quanta are 4 times larger), against quality="reference" (exact
     f64 BRDF per pixel, no tables). Totals within RENDER_RTOL relative, plus 4 quanta of
     the fixed-point accumulator per pixel hit (a quantum is 2^-40 of the largest pixel
     value the tables allow, render/gpu.rs); pixels that both renderers hit at the same
@@ -847,7 +850,7 @@ def test_render_extremes_against_the_f64_reference(name: str, geometry: str) -> 
     att = np.array([_quat_x(t) for t in tilts])
     # one visibility sample per pixel in both: the same pixel-centre points (this compares
     # the shading at the extremes, not the sampling, which the presets set differently)
-    g = pprender.render(scene, pprender.Lidar(resolution=res, pixel_samples=1), att,
+    g = pprender.render(scene, pprender.Lidar(resolution=res, pixel_samples=1, brdf=brdf), att,
                         outputs=("mueller", "profile", "range"))
     r = pprender.render(scene, pprender.Lidar(resolution=res, quality="reference", pixel_samples=1), att,
                         outputs=("mueller", "profile", "range"))
@@ -862,7 +865,7 @@ def test_render_extremes_against_the_f64_reference(name: str, geometry: str) -> 
     # allow, 4 pi pix^2 max M00 (render/gpu.rs); the material's M00 peaks at normal
     # backscatter (D(h = n)) for all of these
     m00_max = float(pprender.brdf(mat, [0, 0, 1.0], [0, 0, 1.0])[0, 0])
-    quantum = 2.0**-40 * 4 * math.pi * g.pixel_size**2 * m00_max
+    quantum = 2.0**-40 * 4 * math.pi * g.pixel_size**2 * m00_max * (4 if brdf == "shader" else 1)
     hits = np.isfinite(r.range).sum(axis=(1, 2))
     dcs = np.abs(g.cross_section - r.cross_section).max(axis=(1, 2))
     assert np.all(dcs <= RENDER_RTOL * r.cross_section[:, 0, 0] + 4 * quantum * hits), (dcs, r.cross_section[:, 0, 0])
@@ -872,6 +875,6 @@ def test_render_extremes_against_the_f64_reference(name: str, geometry: str) -> 
     pix = (np.abs(g.mueller - r.mueller).max(axis=(-1, -2)) / np.where(bright, ref00, np.inf))
     assert pix.max() <= RENDER_RTOL, (pix.max(), np.argwhere(pix == pix.max())[0])
     rel_cs = dcs / np.maximum(r.cross_section[:, 0, 0], 1e-300)
-    print(f"{name} / {geometry}: sigma_ref {r.cross_section[:, 0, 0]}, max rel d(sigma) "
+    print(f"{name} / {geometry} / {brdf}: sigma_ref {r.cross_section[:, 0, 0]}, max rel d(sigma) "
           f"{rel_cs.max():.1e}, max pixel |dM|/M00 {pix.max():.1e} over {bright.sum()} pixels, "
           f"worst Cloude eigenvalue / M00 {worst_ev:.1e}")

@@ -31,7 +31,7 @@ Method
 
 One knob at a time (``measure_knobs``, written after the presets): visibility samples,
 supersampling, resolution and analytic coverage on the CubeSat against the same
-reference; the table grid and ``arithmetic="f64"`` on the sphere at one sample per pixel
+reference; the table grid, ``arithmetic="f64"`` and ``brdf="shader"`` on the sphere at one sample per pixel
 against the reference at the same pixels (only the BRDF evaluation differs); the tables'
 double-bounce quadrature order against the core at the material's order (20 x 20 pixels);
 a Blinn-Phong material's masking integrals (tabulated, exact, the seed's closed form)
@@ -214,6 +214,8 @@ BRDF_KNOBS: list[tuple[str, str, dict[str, Any]]] = [
     ("table", "default grid (balanced)", {}),
     ("table", "accurate's grid", {"table": dict(pprender.lidar.QUALITY["accurate"]["table"])}),
     ("arithmetic", "f64 (default grid)", {"arithmetic": "f64"}),
+    ("brdf", "shader (single term in the kernel)", {"brdf": "shader"}),
+    ("brdf", "shader, f64 twin", {"brdf": "shader", "arithmetic": "f64"}),
     ("quality", "reference (exact f64 core)", {"quality": "reference"}),
 ]
 DOUBLE_ORDERS = (16, 32, 48, 96)
@@ -329,8 +331,9 @@ def knobs_text(rows: list[KnobRow]) -> str:
         "summed to each row's pixels, as in the preset rows.",
         "* **BRDF** (the smooth sphere, Beckmann aluminium, single + multiple): one sample per "
         "pixel at 2 n, against the f64 reference at the same pixels and samples, so only the "
-        "BRDF evaluation differs: the tables' grid and the arithmetic (`arithmetic=\"f64\"` runs "
-        "the kernel's f64 CPU twin on the same tables).",
+        "BRDF evaluation differs: the tables' grid, the arithmetic (`arithmetic=\"f64\"` runs "
+        "the kernel's f64 CPU twin on the same tables), and `brdf=\"shader\"`, the single term "
+        "evaluated per pixel in the kernel (the multiple term still from its default table).",
         "* **double bounce** (Beckmann alpha 0.5 aluminium, single + double, 20 x 20 pixels): "
         "the tables' double-bounce quadrature order against the core at the material's own "
         "order (160).",
@@ -353,13 +356,22 @@ def _knob_reading(rows: list[KnobRow]) -> list[str]:
     ref = by.get("reference (exact f64 core)")
     if f32 is None or f64 is None or ref is None:
         return []
+    shader = by.get("shader (single term in the kernel)")
+    fast = by.get("fast's grid")
+    extra = []
+    if shader is not None and fast is not None:
+        extra = [f"With `brdf=\"shader\"` the single term has no table: the largest per-pixel error is "
+                 f"{shader.pixel_rel:.1e} (f32 and the multiple term's table) against {fast.pixel_rel:.1e} "
+                 f"with the fast grid and {f32.pixel_rel:.1e} with the default one, at "
+                 f"{1e3 * shader.seconds:.1f} ms per realization against {1e3 * f32.seconds:.1f} ms, "
+                 f"and {1e3 * shader.setup_seconds:.1f} ms of setup against {1e3 * f32.setup_seconds:.1f}.", ""]
     return [f"Reading it: on the {scene} scene's default grid, f64 arithmetic moves the largest per-pixel "
             f"error from {f32.pixel_rel:.1e} to {f64.pixel_rel:.1e} (the rest is the tables') and the profile "
             f"L1 from {f32.prof_l1:.1e} to {f64.prof_l1:.1e} (the kernel's f32 pulse integration over a "
             "pixel's range footprint; it grows with the footprint, as the 20-pixel double-bounce rows show), "
             f"at {1e3 * f64.seconds:.1f} ms per realization on the CPU against the kernel's "
             f"{1e3 * f32.seconds:.1f} ms (the exact core: {1e3 * ref.seconds:.1f} ms). Finer tables and higher "
-            "double-bounce orders cost setup time, not time per realization.", ""]
+            "double-bounce orders cost setup time, not time per realization.", "", *extra]
 
 
 def _line(r: Row) -> str:

@@ -71,17 +71,32 @@ fn masking_over_cosines_z(
     zi: f64,
     zo: f64,
 ) -> f64 {
+    let ni = mat.masking_excess_z(wi[2], si, zi);
+    let no = mat.masking_excess_z(wo[2], so, zo);
+    masking_from_excess(mat.correlation, wi, wo, si, so, ni, no)
+}
+
+/// `G(wi, wo) / (cos_i cos_o)` from the masking excesses `ni`, `no` of the two directions
+/// (`P = c / (c + N)`) and the correlation `f(phi)` (seed eq. 6); `si`, `so` the
+/// horizontal lengths of the local `wi`, `wo`.
+#[inline]
+pub(crate) fn masking_from_excess(
+    correlation: crate::microfacet::Correlation,
+    wi: V3,
+    wo: V3,
+    si: f64,
+    so: f64,
+    ni: f64,
+    no: f64,
+) -> f64 {
     let (ci, co) = (wi[2], wo[2]);
-    let (si2, so2) = (si * si, so * so);
-    let ni = mat.masking_excess_z(ci, si, zi);
-    let no = mat.masking_excess_z(co, so, zo);
     let qi = 1.0 / (ci + ni);
     let qo = 1.0 / (co + no);
-    let f = if mat.correlation == crate::microfacet::Correlation::None {
+    let f = if correlation == crate::microfacet::Correlation::None {
         0.0
-    } else if si2 > 0.0 && so2 > 0.0 {
+    } else if si > 0.0 && so > 0.0 {
         let cos_phi = ((wi[0] * wo[0] + wi[1] * wo[1]) / (si * so)).clamp(-1.0, 1.0);
-        mat.correlation.f_from_cos(cos_phi)
+        correlation.f_from_cos(cos_phi)
     } else {
         // An azimuth is undefined along n, where P = 1 and both forms agree.
         1.0
@@ -94,6 +109,29 @@ fn masking_over_cosines_z(
     let (pi, po) = (ci * qi, co * qo);
     let min_term = if pi <= po { qi / co } else { qo / ci };
     (1.0 - f) * uncorrelated + f * min_term
+}
+
+/// The single-bounce Mueller BRDF `D G F / (4 cos_i cos_o)` for local `wi`, `wo` above the
+/// surface, `g = G / (cos_i cos_o)` given, in the beam `bases` `(x_in, y_in, x_out, y_out)`.
+#[inline]
+pub(crate) fn single_mueller(
+    dist: &crate::microfacet::Distribution,
+    eta: crate::optics::fresnel::Eta,
+    wi: V3,
+    wo: V3,
+    g: f64,
+    bases: (V3, V3, V3, V3),
+) -> Mat4 {
+    let h = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+    let d = dist.d(h[2], h[0] * h[0] + h[1] * h[1]);
+    if d.is_nan() || d <= 0.0 {
+        return [[0.0; 4]; 4];
+    }
+    let scale = 0.25 * d * g;
+    let (rs, rp) = fresnel_amplitudes(dot(wi, h).clamp(0.0, 1.0), eta);
+    let mut m = jones_to_mueller(&facet_jones(wi, wo, h, rs, rp, bases));
+    m.iter_mut().flatten().for_each(|x| *x *= scale);
+    m
 }
 
 /// The BRDF Mueller matrix `f(wi, wo)` (1/sr, no cosine factor) of `mat`: the sum of its
@@ -110,24 +148,9 @@ pub fn eval(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
     let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
     let (zi, zo) = (mat.z_of(ci, si), mat.z_of(co, so));
     if terms.single {
-        let hsum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
-        let h = normalize(hsum);
-        let sin2_h = h[0] * h[0] + h[1] * h[1];
-        let d = mat.spec.distribution.d(h[2], sin2_h);
-        if d > 0.0 {
-            let g = masking_over_cosines_z(mat, wi, wo, si, so, zi, zo);
-            let scale = 0.25 * d * g;
-            let cos_d = dot(wi, h).clamp(0.0, 1.0);
-            let (rs, rp) = fresnel_amplitudes(cos_d, mat.spec.eta);
-            let bases = beam_bases(frame, wi, wo);
-            let j = facet_jones(wi, wo, h, rs, rp, bases);
-            let mf = jones_to_mueller(&j);
-            for (row, frow) in m.iter_mut().zip(mf.iter()) {
-                for (x, y) in row.iter_mut().zip(frow.iter()) {
-                    *x = scale * y;
-                }
-            }
-        }
+        let g = masking_over_cosines_z(mat, wi, wo, si, so, zi, zo);
+        let bases = beam_bases(frame, wi, wo);
+        m = single_mueller(&mat.spec.distribution, mat.spec.eta, wi, wo, g, bases);
     }
     if terms.double {
         let m2 = super::double::eval_double_framed(mat, wi, wo, frame);

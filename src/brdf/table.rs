@@ -120,8 +120,12 @@ fn double_only(mat: &Material, w: [f64; 3]) -> Mat4 {
 // BrdfTable: the total Mueller BRDF for the GPU renderer.
 // ---------------------------------------------------------------------------------------
 
+use super::single::{masking_from_excess, single_mueller};
+use crate::microfacet::masking::TABLE_NODES;
+use crate::microfacet::{Correlation, Distribution, MaskingEval};
 pub use crate::optics::frames::change_bases;
 use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, V3};
+use crate::optics::fresnel::Eta;
 use crate::{Error, Result};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -228,6 +232,119 @@ pub struct BrdfTable {
     /// What each part holds (not uploaded; for [`BrdfTable::max_error`]).
     pub kinds: Vec<PartKind>,
     pub parts: Vec<TablePart>,
+    /// The single term when it is evaluated per lookup instead of tabulated
+    /// ([`BrdfTableOptions::single_in_shader`]); it is then not among `parts`.
+    pub single: Option<SingleParams>,
+}
+
+/// What the kernel needs to evaluate the single term per pixel, without a table: the
+/// distribution, the index, the masking correlation and the masking excess `N(theta)`
+/// (`P = cos / (cos + N)`) as a 1D table in the material's `z` (for the default tabulated
+/// APS masking the material's own table, so the evaluation is the core's; for the closed
+/// forms and the quadrature their values at [`TABLE_NODES`] nodes, Catmull-Rom between:
+/// error measured in the tests). Uploaded after the header (`GpuTables::pack`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SingleParams {
+    pub distribution: Distribution,
+    pub eta: Eta,
+    pub correlation: Correlation,
+    pub excess: ZTable,
+}
+
+impl SingleParams {
+    pub fn new(mat: &Material) -> Self {
+        let excess = match &mat.n_table {
+            Some(t) if mat.spec.masking == MaskingEval::Table => t.clone(),
+            _ => {
+                let scale = mat.spec.distribution.table_scale();
+                ZTable::build(scale, TABLE_NODES, |t| {
+                    let (s, c) = t.sin_cos();
+                    let c = c.max(0.0);
+                    mat.masking_excess_z(c, s, mat.z_of(c, s))
+                })
+            }
+        };
+        SingleParams {
+            distribution: mat.spec.distribution,
+            eta: mat.spec.eta,
+            correlation: mat.correlation,
+            excess,
+        }
+    }
+
+    /// The single-bounce Mueller BRDF (1/sr) for local `wi`, `wo` (normal `+z`) in the beam
+    /// `bases`, as the kernel evaluates it (in f64): the zero matrix below the horizon.
+    pub fn eval(&self, wi: V3, wo: V3, bases: (V3, V3, V3, V3)) -> Mat4 {
+        let (ci, co) = (wi[2], wo[2]);
+        if ci <= 0.0 || co <= 0.0 {
+            return [[0.0; 4]; 4];
+        }
+        let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+        let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
+        let n = |c: f64, s: f64| self.excess.eval(c, s).max(0.0);
+        let g = masking_from_excess(self.correlation, wi, wo, si, so, n(ci, si), n(co, so));
+        single_mueller(&self.distribution, self.eta, wi, wo, g, bases)
+    }
+
+    /// Largest `M00 cos(theta_i)` (1/sr) over the nodes of the default single-term grid
+    /// for the bistatic angle `beta` ([`default_grid`]; the value between nodes may
+    /// exceed it: the renderer takes a margin, `GpuTables::pack`).
+    pub fn max_m00_cos(&self, beta: f64) -> f64 {
+        let (n_z, n_psi, scale) = default_grid(PartKind::Single, self.distribution.scale(), beta);
+        let n_psi = if beta > 0.0 { n_psi } else { 0 };
+        (0..(n_z + 1) * (n_psi + 1))
+            .into_par_iter()
+            .map(|idx| {
+                let (j, i) = (idx / (n_z + 1), idx % (n_z + 1));
+                let theta = ZTable::theta_of_z(scale, i as f64 / n_z as f64);
+                let psi = j as f64 * PI / n_psi.max(1) as f64;
+                let (wi, wo) = table_dirs(beta, theta, psi);
+                let m00 = self.eval(wi, wo, bisector_bases(wi, wo))[0][0];
+                if m00.is_finite() {
+                    m00 * wi[2].max(0.0)
+                } else {
+                    0.0
+                }
+            })
+            .reduce(|| 0.0, f64::max)
+    }
+
+    /// The words the kernel reads (`single_in_shader` in `shaders/shade.wgsl`):
+    /// `[distribution (0 Blinn-Phong, 1 Beckmann, 2 GGX; u32 bits), m or alpha,
+    /// perfect conductor (u32 bits), n - 1, k, excess table scale, correlation (0 none,
+    /// 1 seed, 2 APS; u32 bits), intervals of the excess table (u32 bits), its n + 1
+    /// values]`. `n - 1` is rounded from f64, so that `eta` near 1 keeps its relative
+    /// accuracy in `eta^2 - 1 = (n - 1 + i k)(n + 1 + i k)`.
+    pub fn words(&self) -> Vec<f32> {
+        let u = |x: u32| f32::from_bits(x);
+        let (kind, rough) = match self.distribution {
+            Distribution::BlinnPhong { m } => (0, m),
+            Distribution::Beckmann { alpha } => (1, alpha),
+            Distribution::Ggx { alpha } => (2, alpha),
+        };
+        let (pec, nm1, k) = match self.eta {
+            Eta::PerfectConductor => (1, 0.0, 0.0),
+            Eta::Complex(e) => (0, e.re - 1.0, e.im),
+        };
+        let corr = match self.correlation {
+            Correlation::None => 0,
+            Correlation::Seed => 1,
+            Correlation::Aps => 2,
+        };
+        let v = &self.excess.values;
+        let mut w = vec![
+            u(kind),
+            rough as f32,
+            u(pec),
+            nm1 as f32,
+            k as f32,
+            self.excess.scale as f32,
+            u(corr),
+            u((v.len() - 1) as u32),
+        ];
+        w.extend(v.iter().map(|&x| x as f32));
+        w
+    }
 }
 
 /// Grid of one part; `None` takes the default of [`BrdfTableOptions::resolve`].
@@ -253,6 +370,10 @@ pub struct BrdfTableOptions {
     /// Quadrature order of the double bounce in the table.
     pub double_order: Option<usize>,
     pub frame: Option<TableFrame>,
+    /// Evaluate the single term per lookup from the material's parameters
+    /// ([`SingleParams`], in the kernel: `single_in_shader` in `shaders/shade.wgsl`)
+    /// instead of tabulating it.
+    pub single_in_shader: bool,
 }
 
 /// Which terms a part holds.
@@ -707,7 +828,12 @@ impl BrdfTable {
         let (grids, frame) = opts.resolve(mat, beta)?;
         let mut parts = vec![];
         let mut kinds = vec![];
+        let mut single = None;
         for g in grids {
+            if g.kind == PartKind::Single && opts.single_in_shader {
+                single = Some(SingleParams::new(mat));
+                continue;
+            }
             let m = part_material(mat, g.kind);
             let (n_z, n_psi, scale) = (g.n_z, g.n_psi, g.scale);
             let cos_weighted = g.kind == PartKind::Single
@@ -748,6 +874,7 @@ impl BrdfTable {
             frame,
             kinds,
             parts,
+            single,
         })
     }
 
@@ -769,6 +896,15 @@ impl BrdfTable {
             for r in 0..4 {
                 for c in 0..4 {
                     m[r][c] += pm[r][c];
+                }
+            }
+        }
+        if let Some(single) = &self.single {
+            let (wi, wo) = table_dirs(self.beta, sin_t.atan2(cos_t), a);
+            let pm = single.eval(wi, wo, table_bases(self.frame, wi, wo));
+            for k in 0..16 {
+                if k == 0 || (mask >> k) & 1 == 1 {
+                    m[k / 4][k % 4] += pm[k / 4][k % 4];
                 }
             }
         }
@@ -936,6 +1072,127 @@ mod tests {
         e / b[0][0].abs().max(1e-300)
     }
 
+    /// The single term as the kernel evaluates it (in f64: [`SingleParams::eval`]) equals
+    /// the core's single term for the default tabulated APS masking (the same excess
+    /// table), to rounding, over random pairs with grazing ones among them, and through
+    /// `eval_masked` (the twin's path) in the bisector frame; for the Smith closed forms
+    /// and the seed's, whose excess it interpolates on 512 nodes, to 1e-6 of M00 (the seed's:
+    /// 5e-6, measured 1.4e-6, against the closed form's own 1.5e-3 RMS, docs/tradeoff.md).
+    #[test]
+    fn single_params_equal_the_core_single_term() {
+        use crate::microfacet::{MaskingEval, Shadowing};
+        let mut rng = crate::reference::rng::Rng::new(11, &[]);
+        let mut u = || rng.uniform();
+        let cases: Vec<(Distribution, Eta, Shadowing, MaskingEval, f64)> = vec![
+            (
+                Distribution::Beckmann { alpha: 0.3 },
+                Eta::new(0.2, 3.4),
+                Shadowing::Aps,
+                MaskingEval::Table,
+                1e-12,
+            ),
+            (
+                Distribution::Ggx { alpha: 1e-3 },
+                Eta::new(1.0 + 1e-6, 0.0),
+                Shadowing::Aps,
+                MaskingEval::Table,
+                1e-12,
+            ),
+            (
+                Distribution::BlinnPhong { m: 5000.0 },
+                Eta::new(1e3, 1e3),
+                Shadowing::Aps,
+                MaskingEval::Table,
+                1e-12,
+            ),
+            (
+                Distribution::Ggx { alpha: 10.0 },
+                Eta::PerfectConductor,
+                Shadowing::Aps,
+                MaskingEval::Table,
+                1e-12,
+            ),
+            (
+                Distribution::Ggx { alpha: 0.5 },
+                Eta::new(1.5, 0.0),
+                Shadowing::Smith,
+                MaskingEval::Table,
+                1e-6,
+            ),
+            (
+                Distribution::Beckmann { alpha: 0.5 },
+                Eta::new(1.5, 0.0),
+                Shadowing::Smith,
+                MaskingEval::Table,
+                1e-6,
+            ),
+            (
+                Distribution::BlinnPhong { m: 20.0 },
+                Eta::new(1.5, 0.0),
+                Shadowing::Aps,
+                MaskingEval::Seed,
+                5e-6,
+            ),
+        ];
+        for (dist, eta, shadowing, masking, tol) in cases {
+            let mut spec = super::super::MaterialSpec::new(dist, eta);
+            spec.shadowing = shadowing;
+            spec.masking = masking;
+            spec.terms.multiple = false;
+            let mat = Material::new(spec).unwrap();
+            let sp = SingleParams::new(&mat);
+            let mut worst: f64 = 0.0;
+            for k in 0..400 {
+                // every fourth pair has a direction within 1e-7 .. 1e-2 rad of grazing
+                let dir = |a: f64, b: f64, grazing: bool| {
+                    let th = if grazing {
+                        FRAC_PI_2 - 10f64.powf(-7.0 + 5.0 * a)
+                    } else {
+                        a * FRAC_PI_2
+                    };
+                    let ph = 2.0 * PI * b;
+                    [th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]
+                };
+                let wi = dir(u(), u(), k % 4 == 0);
+                let wo = dir(u(), u(), k % 8 == 1);
+                let want = super::super::eval(&mat, wi, wo, Frame::Sp);
+                let got = sp.eval(wi, wo, beam_bases(Frame::Sp, wi, wo));
+                assert!(got.iter().flatten().all(|x| x.is_finite()));
+                if want[0][0] > 1e-300 {
+                    worst = worst.max(rel_diff(&got, &want));
+                }
+            }
+            assert!(worst < tol, "{dist:?} {shadowing:?} {masking:?}: {worst:e}");
+            // through the table's lookup (bisector frame), bistatic
+            let beta = 0.3;
+            let opts = BrdfTableOptions {
+                single_in_shader: true,
+                ..Default::default()
+            };
+            let t = BrdfTable::build(&mat, beta, &opts).unwrap();
+            assert!(t.parts.is_empty());
+            for (theta, psi) in [(0.2f64, 0.5f64), (1.2, -2.0), (1.5, 3.0)] {
+                let (wi, wo) = table_dirs(beta, theta, psi.abs());
+                let mut want = part_reference(
+                    &mat,
+                    PartKind::Single,
+                    TableFrame::Bisector,
+                    beta,
+                    theta,
+                    psi.abs(),
+                );
+                if psi < 0.0 {
+                    want = mirror(&want);
+                }
+                let got = t.eval(theta, psi);
+                assert!(
+                    rel_diff(&got, &want) < tol,
+                    "{dist:?}: ({theta}, {psi}) {wi:?} {wo:?}"
+                );
+            }
+        }
+    }
+
     fn rotz(v: V3, phi: f64) -> V3 {
         let (s, c) = phi.sin_cos();
         [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
@@ -965,6 +1222,7 @@ mod tests {
                 double: grid(4),
                 double_order: Some(12),
                 frame: Some(frame),
+                single_in_shader: false,
             };
             let t = BrdfTable::build(&mat, beta, &opts).unwrap();
             assert_eq!(t.parts.len(), 3);
@@ -1201,6 +1459,7 @@ mod tests {
                 } else {
                     TableFrame::Bisector
                 }),
+                single_in_shader: false,
             };
             let t0 = std::time::Instant::now();
             let t = BrdfTable::build(&mat, num(5).to_radians(), &opts).unwrap();

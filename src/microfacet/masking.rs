@@ -267,7 +267,7 @@ pub fn smith_lambda(dist: &Distribution, variant: SmithG1, cos_t: f64, sin2_t: f
 /// Uniform-in-`z` table of a masking function of `theta`, with `cot theta = s z / (1 - z)`
 /// (`s` the distribution's width): `z = 0` is grazing, `z = 1` normal incidence.
 /// Cubic (Catmull-Rom) interpolation.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ZTable {
     pub scale: f64,
     pub values: Vec<f64>,

@@ -62,10 +62,7 @@ impl SceneTables {
             .par_iter()
             .map(|m| BrdfTable::build(m, beta, &opts))
             .collect::<Result<_>>()?;
-        let refs: Vec<Vec<PartRef<'_>>> = tables
-            .iter()
-            .map(|t| t.parts.iter().map(PartRef::from).collect())
-            .collect();
+        let refs: Vec<Vec<PartRef<'_>>> = tables.iter().map(PartRef::of).collect();
         let g = Arc::new(GpuTables::pack(&refs, beta)?);
         let t = Arc::new(tables);
         self.cache
