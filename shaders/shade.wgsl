@@ -66,9 +66,10 @@ override SAMPLES: u32 = 1u;
 // the triangles seen at the centres of its 3x3 neighbourhood by exact polygon clipping in
 // depth order (see cs_main and coverage_parts).
 override COVERAGE: bool = false;
-// Some material's single term is evaluated here instead of looked up (single_in_shader;
-// its part's n_psi header word is SHADER_PART): compiled out when no material needs it.
-override SINGLE_IN_SHADER: bool = false;
+// Some material's single or multiple + diffuse terms are evaluated here instead of looked
+// up (BrdfTableOptions::in_shader; such a part's n_psi header word is SHADER_PART):
+// compiled out when no material needs it.
+override IN_SHADER: bool = false;
 
 const PI: f32 = 3.14159265358979;
 const MAX_PARTS: u32 = 3u;
@@ -233,11 +234,11 @@ fn add_part(m: u32, p: u32, z: f32, psi: f32, w: f32, acc: ptr<function, array<f
     }
 }
 
-// ---- the single term evaluated in the kernel (SINGLE_IN_SHADER; twin: SingleParams::eval
-// in src/brdf/table.rs, through BrdfTable::eval_masked) ----
-// The material's words at `blk` (SingleParams::words): distribution kind and m or alpha,
-// perfect-conductor flag, n - 1 and k, the masking-excess table (scale, correlation kind,
-// intervals, values). All vectors are in the telescope frame.
+// ---- terms evaluated in the kernel (IN_SHADER; twins: SingleParams::eval and
+// LambertianParams::eval in src/brdf/table.rs, through BrdfTable::eval_masked) ----
+// The material's words at `blk` (SingleParams::words): kind 0, distribution kind and m or
+// alpha, perfect-conductor flag, n - 1 and k, the masking-excess table (scale, correlation
+// kind, intervals, values). All vectors are in the telescope frame.
 
 fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
     return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
@@ -314,15 +315,16 @@ fn ndf(kind: u32, r: f32, cos_h: f32, sin2_h: f32) -> f32 {
     return a2 / (PI * t * t);
 }
 
-// The masking excess N at (cos, sin) from the material's 1D table (ZTable::eval_z).
-fn excess(blk: u32, c: f32, s: f32) -> f32 {
-    let scale = tables[blk + 5u];
-    let n = bitcast<u32>(tables[blk + 7u]);
-    let z = clamp(c / max(scale * s + c, 1e-30), 0.0, 1.0);
+// z of the mapping cot theta = s z / (1 - z) from (cos, sin) (ZTable::z_of)
+fn z_of(scale: f32, c: f32, s: f32) -> f32 {
+    return clamp(c / max(scale * s + c, 1e-30), 0.0, 1.0);
+}
+
+// A 1D table's n + 1 values at `v`, uniform in z, interpolated at z (ZTable::eval_z).
+fn table_1d(v: u32, n: u32, z: f32) -> f32 {
     let x = z * f32(n);
     let i = min(u32(x), n - 1u);
     let t = x - f32(i);
-    let v = blk + 8u;
     let p1 = tables[v + i];
     let p2 = tables[v + i + 1u];
     var p0: f32;
@@ -337,18 +339,24 @@ fn excess(blk: u32, c: f32, s: f32) -> f32 {
     } else {
         p3 = 3.0 * p2 - 3.0 * p1 + tables[v + max(i, 1u) - 1u];
     }
-    return max(catmull_rom(p0, p1, p2, p3, t), 0.0);
+    return catmull_rom(p0, p1, p2, p3, t);
+}
+
+// The masking excess N at (cos, sin) from the material's 1D table.
+fn excess(blk: u32, c: f32, s: f32) -> f32 {
+    let z = z_of(tables[blk + 6u], c, s);
+    return max(table_1d(blk + 9u, bitcast<u32>(tables[blk + 8u]), z), 0.0);
 }
 
 // Adds the single term times cos(theta_i), M cos_i = D F (G / cos_o) / 4 (in the beam
 // bases x_in, x_out; y = k x x), at the unit normal n for wi, wo above it, to acc (the
 // elements in ELEMENT_MASK). G / cos_o is formed without dividing by cos_i, so that it
 // stays finite at grazing incidence: (1 - f) P_i Q_o + f min(P_i, P_o) / cos_o, Q = P / cos.
-fn add_single_in_shader(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_in: vec3<f32>,
+fn add_single_in_kernel(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_in: vec3<f32>,
                         x_out: vec3<f32>, acc: ptr<function, array<f32, 16>>) {
     let h = safe_normalize(wi + wo, n);
     let nxh = cross(n, h);
-    let d = ndf(bitcast<u32>(tables[blk]), tables[blk + 1u], dot(n, h), dot(nxh, nxh));
+    let d = ndf(bitcast<u32>(tables[blk + 1u]), tables[blk + 2u], dot(n, h), dot(nxh, nxh));
     if (!(d > 0.0)) {
         return;
     }
@@ -361,7 +369,7 @@ fn add_single_in_shader(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_
     let so = length(uo);
     let qi = 1.0 / (ci + excess(blk, ci, si));
     let qo = 1.0 / (co + excess(blk, co, so));
-    let corr = bitcast<u32>(tables[blk + 6u]);
+    let corr = bitcast<u32>(tables[blk + 7u]);
     var f = 0.0;
     if (corr != 0u) {
         f = 1.0;
@@ -378,8 +386,8 @@ fn add_single_in_shader(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_
     let p_i = ci * qi;
     let p_o = co * qo;
     let g_ci = (1.0 - f) * p_i * qo + f * select(qo, p_i / co, p_i <= p_o);
-    let r = fresnel_rs_rp(clamp(dot(wi, h), 0.0, 1.0), tables[blk + 3u], tables[blk + 4u],
-                          bitcast<u32>(tables[blk + 2u]) != 0u);
+    let r = fresnel_rs_rp(clamp(dot(wi, h), 0.0, 1.0), tables[blk + 4u], tables[blk + 5u],
+                          bitcast<u32>(tables[blk + 3u]) != 0u);
     let rs = r.xy;
     let rp = r.zw;
     // the facet's s/p basis (brdf::single::facet_sp_basis): s = normalize(k_in x h)
@@ -435,6 +443,40 @@ fn add_single_in_shader(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_
             (*acc)[e] += scale * m[e];
         }
     }
+}
+
+// Adds the multiple + diffuse terms times cos(theta_i) to acc[0] (M00 only; twin:
+// LambertianParams::eval in src/brdf/table.rs): per term c (1 - E(theta_i)) (1 - E(theta_o))
+// from the material's albedo table E. Words at `blk` (LambertianParams::words): kind 1,
+// the z scale, the number of terms, then per term c, s_f (0: E in z; else in
+// zeta = (z + z_1 + z_sf) / 3, material.rs zeta_of), intervals, values.
+fn add_lambertian_in_kernel(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>,
+                            acc: ptr<function, array<f32, 16>>) {
+    let ci = dot(n, wi);
+    let co = dot(n, wo);
+    let si = length(cross(n, wi));
+    let so = length(cross(n, wo));
+    let scale = tables[blk + 1u];
+    let zi = z_of(scale, ci, si);
+    let zo = z_of(scale, co, so);
+    var o = blk + 3u;
+    var v = 0.0;
+    for (var k = 0u; k < bitcast<u32>(tables[blk + 2u]); k++) {
+        let c = tables[o];
+        let sf = tables[o + 1u];
+        let nz = bitcast<u32>(tables[o + 2u]);
+        var xi = zi;
+        var xo = zo;
+        if (sf > 0.0) {
+            xi = (zi + z_of(1.0, ci, si) + z_of(sf, ci, si)) / 3.0;
+            xo = (zo + z_of(1.0, co, so) + z_of(sf, co, so)) / 3.0;
+        }
+        let a = max(1.0 - table_1d(o + 3u, nz, xi), 0.0);
+        let b = max(1.0 - table_1d(o + 3u, nz, xo), 0.0);
+        v += c * a * b;
+        o += 4u + nz;
+    }
+    (*acc)[0] += v * ci;
 }
 
 // ---- geometry helpers ----
@@ -951,10 +993,19 @@ fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32
             let x_out = safe_normalize(e_phi - dot(e_phi, wo) * wo, any_perp(wo));
             let y_in = cross(k_in, x_in);
             let y_out = cross(wo, x_out);
-            // the single term evaluated here (the table's parts hold the others)
-            if (SINGLE_IN_SHADER && bitcast<u32>(tables[mat * HEADER_WORDS + 2u]) == SHADER_PART) {
-                add_single_in_shader(bitcast<u32>(tables[mat * HEADER_WORDS]), n, wi, wo, x_in,
-                                     x_out, &m);
+            // the parts evaluated here instead of looked up (their kind is their first word)
+            if (IN_SHADER) {
+                for (var part = 0u; part < MAX_PARTS; part++) {
+                    let hw = mat * HEADER_WORDS + part * 4u;
+                    if (bitcast<u32>(tables[hw + 2u]) == SHADER_PART) {
+                        let blk = bitcast<u32>(tables[hw]);
+                        if (bitcast<u32>(tables[blk]) == 0u) {
+                            add_single_in_kernel(blk, n, wi, wo, x_in, x_out, &m);
+                        } else {
+                            add_lambertian_in_kernel(blk, n, wi, wo, &m);
+                        }
+                    }
+                }
             }
             // telescope bases: x_in_t = normalize(k_in x Y), x_out_t = X (wo = Z)
             let x_in_t = normalize(cross(k_in, vec3<f32>(0.0, 1.0, 0.0)));

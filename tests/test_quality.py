@@ -120,14 +120,15 @@ def test_f64_arithmetic_is_the_kernel_in_double_precision():
     np.testing.assert_allclose(i.profile, m.profile[..., 0, 0], rtol=1e-12, atol=0)
 
 
-def test_single_term_in_the_shader_is_the_core_in_f32():
-    """``brdf="shader"``: the kernel evaluates the single term per pixel (no single-term
-    table). For a single-term material with the default tabulated APS masking this is the
-    core's model, so against the exact f64 reference only f32 arithmetic remains (its twin,
+@pytest.mark.parametrize("terms", [("single",), ("single", "multiple"), ("single", "multiple", "diffuse")])
+def test_terms_in_the_shader_are_the_core_in_f32(terms: tuple[str, ...]) -> None:
+    """``brdf="shader"``: the kernel evaluates the single, multiple and diffuse terms per
+    pixel (no tables for them). With the default tabulated APS masking this is the core's
+    model, so against the exact f64 reference only f32 arithmetic remains (its twin,
     ``arithmetic="f64"``, is the reference to rounding), while the tables of the ``fast``
-    preset are measurably off; with the multiple term its 2D table's error comes back."""
-    single = pprender.Material("beckmann", alpha=0.3, eta=1.38 + 10.2j, terms=["single"])
-    scene = _sphere_scene(single)
+    preset are measurably off."""
+    mat = pprender.Material("beckmann", alpha=0.3, eta=1.38 + 10.2j, terms=list(terms), diffuse_albedo=0.5)
+    scene = _sphere_scene(mat)
     q = np.array([[0.9, 0.3, -0.2, 0.25]])
     q /= np.linalg.norm(q)
     out = ("mueller", "profile", "range")
@@ -136,7 +137,7 @@ def test_single_term_in_the_shader_is_the_core_in_f32():
         ref = pprender.render(scene, pprender.Lidar(quality="reference", **kw), q, outputs=out)
         sh = pprender.render(scene, pprender.Lidar(brdf="shader", **kw), q, outputs=out)
         tw = pprender.render(scene, pprender.Lidar(brdf="shader", arithmetic="f64", **kw), q, outputs=out)
-        fast = pprender.render(scene, pprender.Lidar(quality="fast", brdf="table", **kw), q, outputs=out)
+        fast = pprender.render(scene, pprender.Lidar(quality="fast", **kw), q, outputs=out)
         fast_sh = pprender.render(scene, pprender.Lidar(quality="fast", brdf="shader", **kw), q, outputs=out)
         e_twin = _rel_image_error(tw.mueller, ref.mueller, 1e-2)
         same = (sh.coverage == ref.coverage)[..., None, None]
@@ -144,20 +145,23 @@ def test_single_term_in_the_shader_is_the_core_in_f32():
         same_f = (fast.coverage == ref.coverage)[..., None, None]
         e_fast = _rel_image_error(np.where(same_f, fast.mueller, ref.mueller), ref.mueller, 1e-2)
         e_fast_sh = _rel_image_error(np.where(same_f, fast_sh.mueller, ref.mueller), ref.mueller, 1e-2)
-        print(f"beta {beta}: twin {e_twin:.1e}, shader f32 {e_sh:.1e}, fast tables {e_fast:.1e}, "
+        print(f"{terms}, beta {beta}: twin {e_twin:.1e}, shader f32 {e_sh:.1e}, fast tables {e_fast:.1e}, "
               f"fast with shader {e_fast_sh:.1e}")
-        # the twin evaluates the core's formulas on the core's masking table: rounding
+        # the twin evaluates the core's formulas on the core's 1D tables: rounding
         assert e_twin < 1e-12, e_twin
-        # f32 (the Rust kernel test measures up to 3e-4 at rims of rough spheres; this one,
-        # alpha 0.3 on pixels above 1% of the peak, 1e-5)
+        # f32 (the Rust kernel test measures up to 3e-4 at the rims of rough spheres; here,
+        # alpha 0.3 on pixels above 1% of the peak, 3e-6 to 1e-5)
         assert e_sh < 1e-4, e_sh
-        # the fast preset's single-term table (64 x 16 nodes) is coarser than f32, and the
-        # shader removes it: the fast preset's remaining difference is only f32
+        # the fast preset's tables (64 nodes in z) are coarser than f32, and the shader
+        # removes them: what is left of the fast preset's difference is f32
         assert e_fast > 3 * e_fast_sh, (e_fast, e_fast_sh)
         np.testing.assert_allclose(sh.cross_section, ref.cross_section, rtol=0,
                                    atol=1e-5 * ref.cross_section[0, 0, 0])
         np.testing.assert_allclose(sh.profile.sum(axis=1), sh.cross_section, rtol=0,
                                    atol=1e-6 * sh.cross_section[0, 0, 0])
+
+
+def test_brdf_knob_is_checked():
     with pytest.raises(pprender.Error, match="brdf"):
         pprender.Lidar(brdf="exact")
     with pytest.raises(pprender.Error, match="brdf"):

@@ -269,7 +269,7 @@ class RenderScene:
         n_z_double: int | None = None,
         n_psi_double: int | None = None,
         double_order: int | None = None,
-        single_in_shader: bool = False,
+        in_shader: bool = False,
     ) -> float: ...
     def render(
         self,
@@ -297,7 +297,7 @@ class RenderScene:
         n_z_double: int | None = None,
         n_psi_double: int | None = None,
         double_order: int | None = None,
-        single_in_shader: bool = False,
+        in_shader: bool = False,
     ) -> dict[str, Any]: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...

@@ -214,7 +214,7 @@ BRDF_KNOBS: list[tuple[str, str, dict[str, Any]]] = [
     ("table", "default grid (balanced)", {}),
     ("table", "accurate's grid", {"table": dict(pprender.lidar.QUALITY["accurate"]["table"])}),
     ("arithmetic", "f64 (default grid)", {"arithmetic": "f64"}),
-    ("brdf", "shader (single term in the kernel)", {"brdf": "shader"}),
+    ("brdf", "shader (terms evaluated in the kernel)", {"brdf": "shader"}),
     ("brdf", "shader, f64 twin", {"brdf": "shader", "arithmetic": "f64"}),
     ("quality", "reference (exact f64 core)", {"quality": "reference"}),
 ]
@@ -332,8 +332,9 @@ def knobs_text(rows: list[KnobRow]) -> str:
         "* **BRDF** (the smooth sphere, Beckmann aluminium, single + multiple): one sample per "
         "pixel at 2 n, against the f64 reference at the same pixels and samples, so only the "
         "BRDF evaluation differs: the tables' grid, the arithmetic (`arithmetic=\"f64\"` runs "
-        "the kernel's f64 CPU twin on the same tables), and `brdf=\"shader\"`, the single term "
-        "evaluated per pixel in the kernel (the multiple term still from its default table).",
+        "the kernel's f64 CPU twin on the same tables), and `brdf=\"shader\"`: the single and "
+        "multiple terms evaluated per pixel in the kernel from the material's parameters and "
+        "1D tables, no BRDF tables.",
         "* **double bounce** (Beckmann alpha 0.5 aluminium, single + double, 20 x 20 pixels): "
         "the tables' double-bounce quadrature order against the core at the material's own "
         "order (160).",
@@ -356,12 +357,12 @@ def _knob_reading(rows: list[KnobRow]) -> list[str]:
     ref = by.get("reference (exact f64 core)")
     if f32 is None or f64 is None or ref is None:
         return []
-    shader = by.get("shader (single term in the kernel)")
+    shader = by.get("shader (terms evaluated in the kernel)")
     fast = by.get("fast's grid")
     extra = []
     if shader is not None and fast is not None:
-        extra = [f"With `brdf=\"shader\"` the single term has no table: the largest per-pixel error is "
-                 f"{shader.pixel_rel:.1e} (f32 and the multiple term's table) against {fast.pixel_rel:.1e} "
+        extra = [f"With `brdf=\"shader\"` no BRDF table is interpolated: the largest per-pixel error is "
+                 f"{shader.pixel_rel:.1e} (f32 alone) against {fast.pixel_rel:.1e} "
                  f"with the fast grid and {f32.pixel_rel:.1e} with the default one, at "
                  f"{1e3 * shader.seconds:.1f} ms per realization against {1e3 * f32.seconds:.1f} ms, "
                  f"and {1e3 * shader.setup_seconds:.1f} ms of setup against {1e3 * f32.setup_seconds:.1f}.", ""]

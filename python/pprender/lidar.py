@@ -229,15 +229,16 @@ class Lidar:
     docs/render-benchmark.md, docs/equal-error.md); on a GPU ``"f32"`` is
     the choice. ``quality="reference"`` is f64 already (``arithmetic`` unset or ``"f64"``).
     ``brdf``: ``"table"`` (default) looks every term up in the per-material tables of
-    :func:`pprender.brdf_table`; ``"shader"`` evaluates the single-bounce term per pixel
-    in the kernel instead (and in its twin for ``arithmetic="f64"``): the microfacet
-    distribution, the complex Fresnel amplitudes and their Mueller matrix, the masking
-    correlation, with the masking excess from the material's own 1D table (its model for
-    the default ``masking="table"``; the Smith and seed closed forms and ``"exact"`` through
-    a 512-node table of theirs, within 1e-6 and 5e-6 of M00). The single term's table
-    grid (``n_z``, ``n_psi``) and its interpolation error then drop out, and no single-term
-    table is built; the multiple, diffuse and double terms stay tabulated (the double
-    bounce is an integral per pixel). What it costs and gains is in docs/tradeoff.md.
+    :func:`pprender.brdf_table`; ``"shader"`` evaluates the single, multiple and diffuse
+    terms per pixel in the kernel instead (and in its twin for ``arithmetic="f64"``): the
+    microfacet distribution, the complex Fresnel amplitudes and their Mueller matrix, the
+    masking correlation, the masking excess and the albedos from the material's own 1D
+    tables. That is the core's model for the default ``masking="table"`` (the Smith and
+    seed closed forms and ``"exact"`` go through a 512-node table of theirs, within 1e-6
+    and 5e-6 of M00), so only f32 arithmetic remains: the tables' grids (``n_z``,
+    ``n_psi``, ``n_z_lambertian``, ``n_psi_lambertian``) and their interpolation error drop
+    out, and no such tables are built. The double bounce stays tabulated (it is an integral
+    per pixel). What it costs and gains is in docs/tradeoff.md.
     ``intensity_only``: with a ``polarization``, compute only the received intensity ``S0``
     (``"intensity"`` images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel
     then looks up only the Mueller elements it needs (``M00`` alone for an unpolarized
@@ -267,7 +268,7 @@ class Lidar:
     def __post_init__(self) -> None:
         if self.brdf not in ("table", "shader"):
             raise Error(f'invalid brdf = {self.brdf!r}: "table" (per-material tables) or "shader" '
-                        "(the single term evaluated per pixel)")
+                        "(the single, multiple and diffuse terms evaluated per pixel)")
         if self.quality == "reference" and self.brdf == "shader":
             raise Error('invalid brdf = "shader" with quality = "reference": the reference evaluates '
                         'every term exactly per pixel already (leave brdf = "table")')
@@ -563,7 +564,7 @@ def render(
     reference = sensor.quality == "reference"
     topts: dict[str, Any] = {} if reference else dict(sensor.table_options())
     if sensor.brdf == "shader":
-        topts["single_in_shader"] = True
+        topts["in_shader"] = True
     t_tables = 0.0 if reference else float(scene._core.prepare(float(sensor.bistatic_angle), **topts))
     res = sensor.effective_resolution(scene.radius)
     pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]

@@ -123,7 +123,7 @@ impl MaterialSpec {
 }
 
 /// Albedo tables of one layer (see [`ZTable`]).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct AlbedoTable {
     /// Directional albedo `E(theta)`: at nodes uniform in the material's `z`, or with
     /// `fresnel_scale` in `zeta` ([`zeta_of`]).

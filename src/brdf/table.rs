@@ -233,8 +233,91 @@ pub struct BrdfTable {
     pub kinds: Vec<PartKind>,
     pub parts: Vec<TablePart>,
     /// The single term when it is evaluated per lookup instead of tabulated
-    /// ([`BrdfTableOptions::single_in_shader`]); it is then not among `parts`.
+    /// ([`BrdfTableOptions::in_shader`]); it is then not among `parts`.
     pub single: Option<SingleParams>,
+    /// Likewise the multiple + diffuse terms.
+    pub lambertian: Option<LambertianParams>,
+}
+
+/// The multiple and diffuse terms evaluated per lookup, without a 2D table: each is
+/// `c (1 - E(theta_i)) (1 - E(theta_o))` (M00 only) with the material's own 1D albedo
+/// table `E` (in its `z`, or `zeta` for the Fresnel-scaled ones) and `c` =
+/// `F_ms / (pi (1 - E_avg))` or `rho_d / (pi (1 - E_avg))` (0 where `1 - E_avg <= 1e-14`,
+/// as [`Material::multiple_z`]), so the value is the core's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LambertianParams {
+    /// `s` of the material's `z` ([`Distribution::table_scale`]).
+    pub table_scale: f64,
+    /// `(E, c)` per enabled term.
+    pub terms: Vec<(crate::brdf::material::AlbedoTable, f64)>,
+}
+
+impl LambertianParams {
+    pub fn new(mat: &Material) -> Self {
+        let coef = |t: &crate::brdf::material::AlbedoTable, x: f64| {
+            let denom = PI * (1.0 - t.e_avg);
+            if denom <= 1e-14 {
+                0.0
+            } else {
+                x / denom
+            }
+        };
+        let mut terms = vec![];
+        if mat.spec.terms.multiple {
+            let t = mat.e_white.as_ref().expect("multiple term enabled");
+            terms.push((t.clone(), coef(t, mat.f_ms)));
+        }
+        if mat.spec.terms.diffuse {
+            let t = mat.e_spec.as_ref().expect("diffuse term enabled");
+            terms.push((t.clone(), coef(t, mat.spec.diffuse_albedo)));
+        }
+        LambertianParams {
+            table_scale: mat.spec.distribution.table_scale(),
+            terms,
+        }
+    }
+
+    /// `M00` (1/sr) for local `wi`, `wo`; 0 below the horizon.
+    pub fn eval(&self, wi: V3, wo: V3) -> f64 {
+        let (ci, co) = (wi[2], wo[2]);
+        if ci <= 0.0 || co <= 0.0 {
+            return 0.0;
+        }
+        let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+        let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
+        let (zi, zo) = (
+            z_of(self.table_scale, ci, si),
+            z_of(self.table_scale, co, so),
+        );
+        self.terms
+            .iter()
+            .map(|(t, c)| {
+                let a = (1.0 - t.eval_csz(ci, si, zi)).max(0.0);
+                let b = (1.0 - t.eval_csz(co, so, zo)).max(0.0);
+                c * a * b
+            })
+            .sum()
+    }
+
+    /// Its bound on `M00 cos(theta_i)`: the sum of the coefficients.
+    pub fn max_m00_cos(&self) -> f64 {
+        self.terms.iter().map(|(_, c)| c).sum()
+    }
+
+    /// The words the kernel reads (`add_lambertian_in_kernel` in `shaders/shade.wgsl`):
+    /// `[1 (the kind; u32 bits), table scale, terms (u32 bits)]`, then per term
+    /// `[c, s_f (0: the table is in z), intervals (u32 bits), its n + 1 values]`.
+    pub fn words(&self) -> Vec<f32> {
+        let u = |x: u32| f32::from_bits(x);
+        let mut w = vec![u(1), self.table_scale as f32, u(self.terms.len() as u32)];
+        for (t, c) in &self.terms {
+            w.push(*c as f32);
+            w.push(t.fresnel_scale.unwrap_or(0.0) as f32);
+            w.push(u((t.e.values.len() - 1) as u32));
+            w.extend(t.e.values.iter().map(|&x| x as f32));
+        }
+        w
+    }
 }
 
 /// What the kernel needs to evaluate the single term per pixel, without a table: the
@@ -309,9 +392,10 @@ impl SingleParams {
             .reduce(|| 0.0, f64::max)
     }
 
-    /// The words the kernel reads (`single_in_shader` in `shaders/shade.wgsl`):
-    /// `[distribution (0 Blinn-Phong, 1 Beckmann, 2 GGX; u32 bits), m or alpha,
-    /// perfect conductor (u32 bits), n - 1, k, excess table scale, correlation (0 none,
+    /// The words the kernel reads (`add_single_in_kernel` in `shaders/shade.wgsl`):
+    /// `[0 (the kind; u32 bits), distribution (0 Blinn-Phong, 1 Beckmann, 2 GGX; u32
+    /// bits), m or alpha, perfect conductor (u32 bits), n - 1, k, excess table scale,
+    /// correlation (0 none,
     /// 1 seed, 2 APS; u32 bits), intervals of the excess table (u32 bits), its n + 1
     /// values]`. `n - 1` is rounded from f64, so that `eta` near 1 keeps its relative
     /// accuracy in `eta^2 - 1 = (n - 1 + i k)(n + 1 + i k)`.
@@ -333,6 +417,7 @@ impl SingleParams {
         };
         let v = &self.excess.values;
         let mut w = vec![
+            u(0),
             u(kind),
             rough as f32,
             u(pec),
@@ -370,10 +455,11 @@ pub struct BrdfTableOptions {
     /// Quadrature order of the double bounce in the table.
     pub double_order: Option<usize>,
     pub frame: Option<TableFrame>,
-    /// Evaluate the single term per lookup from the material's parameters
-    /// ([`SingleParams`], in the kernel: `single_in_shader` in `shaders/shade.wgsl`)
-    /// instead of tabulating it.
-    pub single_in_shader: bool,
+    /// Evaluate the single term ([`SingleParams`]) and the multiple + diffuse terms
+    /// ([`LambertianParams`]) per lookup from the material's parameters and 1D tables (in
+    /// the kernel: `add_single_in_kernel`, `add_lambertian_in_kernel` in
+    /// `shaders/shade.wgsl`) instead of tabulating them; the double bounce stays tabulated.
+    pub in_shader: bool,
 }
 
 /// Which terms a part holds.
@@ -829,10 +915,20 @@ impl BrdfTable {
         let mut parts = vec![];
         let mut kinds = vec![];
         let mut single = None;
+        let mut lambertian = None;
         for g in grids {
-            if g.kind == PartKind::Single && opts.single_in_shader {
-                single = Some(SingleParams::new(mat));
-                continue;
+            if opts.in_shader {
+                match g.kind {
+                    PartKind::Single => {
+                        single = Some(SingleParams::new(mat));
+                        continue;
+                    }
+                    PartKind::Lambertian => {
+                        lambertian = Some(LambertianParams::new(mat));
+                        continue;
+                    }
+                    PartKind::Double(_) => {}
+                }
             }
             let m = part_material(mat, g.kind);
             let (n_z, n_psi, scale) = (g.n_z, g.n_psi, g.scale);
@@ -875,6 +971,7 @@ impl BrdfTable {
             kinds,
             parts,
             single,
+            lambertian,
         })
     }
 
@@ -899,13 +996,18 @@ impl BrdfTable {
                 }
             }
         }
-        if let Some(single) = &self.single {
+        if self.single.is_some() || self.lambertian.is_some() {
             let (wi, wo) = table_dirs(self.beta, sin_t.atan2(cos_t), a);
-            let pm = single.eval(wi, wo, table_bases(self.frame, wi, wo));
-            for k in 0..16 {
-                if k == 0 || (mask >> k) & 1 == 1 {
-                    m[k / 4][k % 4] += pm[k / 4][k % 4];
+            if let Some(single) = &self.single {
+                let pm = single.eval(wi, wo, table_bases(self.frame, wi, wo));
+                for k in 0..16 {
+                    if k == 0 || (mask >> k) & 1 == 1 {
+                        m[k / 4][k % 4] += pm[k / 4][k % 4];
+                    }
                 }
+            }
+            if let Some(l) = &self.lambertian {
+                m[0][0] += l.eval(wi, wo);
             }
         }
         if mirrored {
@@ -1166,7 +1268,7 @@ mod tests {
             // through the table's lookup (bisector frame), bistatic
             let beta = 0.3;
             let opts = BrdfTableOptions {
-                single_in_shader: true,
+                in_shader: true,
                 ..Default::default()
             };
             let t = BrdfTable::build(&mat, beta, &opts).unwrap();
@@ -1222,7 +1324,7 @@ mod tests {
                 double: grid(4),
                 double_order: Some(12),
                 frame: Some(frame),
-                single_in_shader: false,
+                in_shader: false,
             };
             let t = BrdfTable::build(&mat, beta, &opts).unwrap();
             assert_eq!(t.parts.len(), 3);
@@ -1459,7 +1561,7 @@ mod tests {
                 } else {
                     TableFrame::Bisector
                 }),
-                single_in_shader: false,
+                in_shader: false,
             };
             let t0 = std::time::Instant::now();
             let t = BrdfTable::build(&mat, num(5).to_radians(), &opts).unwrap();

@@ -660,7 +660,7 @@ fn brdf_table(
         },
         double_order,
         frame: Some(frame),
-        single_in_shader: false,
+        in_shader: false,
     };
     let mat = material.inner.clone();
     let (table, secs) = py.detach(|| {

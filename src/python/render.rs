@@ -42,7 +42,7 @@ fn table_options(
     n_z_double: Option<usize>,
     n_psi_double: Option<usize>,
     double_order: Option<usize>,
-    single_in_shader: bool,
+    in_shader: bool,
 ) -> BrdfTableOptions {
     let part = |n_z, n_psi| PartOptions {
         n_z,
@@ -55,7 +55,7 @@ fn table_options(
         double: part(n_z_double, n_psi_double),
         double_order,
         frame: None,
-        single_in_shader,
+        in_shader,
     }
 }
 
@@ -139,7 +139,7 @@ impl PyRenderScene {
     /// Build (or fetch from the cache) the GPU tables for a bistatic angle and table grid
     /// (keywords as `brdf_table`); returns the build time in seconds (0 when cached).
     #[pyo3(signature = (bistatic_angle, *, n_z=None, n_psi=None, n_z_lambertian=None,
-        n_psi_lambertian=None, n_z_double=None, n_psi_double=None, double_order=None, single_in_shader=false))]
+        n_psi_lambertian=None, n_z_double=None, n_psi_double=None, double_order=None, in_shader=false))]
     #[allow(clippy::too_many_arguments)]
     fn prepare(
         &self,
@@ -152,7 +152,7 @@ impl PyRenderScene {
         n_z_double: Option<usize>,
         n_psi_double: Option<usize>,
         double_order: Option<usize>,
-        single_in_shader: bool,
+        in_shader: bool,
     ) -> PyResult<f64> {
         let opts = table_options(
             n_z,
@@ -162,7 +162,7 @@ impl PyRenderScene {
             n_z_double,
             n_psi_double,
             double_order,
-            single_in_shader,
+            in_shader,
         );
         let t = std::time::Instant::now();
         let (_, built) = py.detach(|| self.tables.get_with(bistatic_angle, &opts))?;
@@ -181,7 +181,7 @@ impl PyRenderScene {
         intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
         pulse_spacing=0.0, analytic=false, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
-        n_z_double=None, n_psi_double=None, double_order=None, single_in_shader=false))]
+        n_z_double=None, n_psi_double=None, double_order=None, in_shader=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -209,7 +209,7 @@ impl PyRenderScene {
         n_z_double: Option<usize>,
         n_psi_double: Option<usize>,
         double_order: Option<usize>,
-        single_in_shader: bool,
+        in_shader: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let opts = table_options(
             n_z,
@@ -219,7 +219,7 @@ impl PyRenderScene {
             n_z_double,
             n_psi_double,
             double_order,
-            single_in_shader,
+            in_shader,
         );
         let rv = rotations.as_array();
         if rv.shape()[1] != 3 || rv.shape()[2] != 3 {

@@ -102,7 +102,7 @@ struct ShadeKey {
     /// Analytic coverage ([`SensorSetup::analytic`]).
     analytic: bool,
     /// Some material's single term is evaluated in the kernel ([`GpuTables`]).
-    single_in_shader: bool,
+    in_shader: bool,
 }
 
 static CONTEXTS: OnceLock<Mutex<HashMap<DeviceChoice, Arc<Gpu>>>> = OnceLock::new();
@@ -420,7 +420,7 @@ impl Gpu {
             ("ELEMENT_MASK", key.elements as f64),
             ("SAMPLES", key.samples as f64),
             ("COVERAGE", b(key.analytic)),
-            ("SINGLE_IN_SHADER", b(key.single_in_shader)),
+            ("IN_SHADER", b(key.in_shader)),
         ];
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let p = self
@@ -629,12 +629,13 @@ pub struct GpuTables {
     /// `atan(1 / (scale n_z))` of grazing, where the clamp would touch it.)
     pub max_m00: f64,
     /// Some material's single term is evaluated in the kernel
-    /// ([`crate::brdf::table::SingleParams`]): the kernel's `SINGLE_IN_SHADER`.
-    pub single_in_shader: bool,
+    /// ([`crate::brdf::table::SingleParams`]): the kernel's `IN_SHADER`.
+    pub in_shader: bool,
 }
 
 /// `n_psi` header word of a part evaluated in the kernel (`n_z` word 0, offset: its
-/// [`crate::brdf::table::SingleParams::words`]).
+/// words, [`crate::brdf::table::SingleParams::words`] or
+/// [`crate::brdf::table::LambertianParams::words`], the first of which is its kind).
 pub const SHADER_PART: u32 = u32::MAX;
 /// Margin on the sampled bound of an in-kernel part's `M00 cos(theta_i)` for
 /// [`GpuTables::max_m00`] (it is sampled at nodes, and the kernel clamps a pixel at the
@@ -654,9 +655,15 @@ pub struct PartRef<'a> {
     pub data: &'a [f64],
     /// The nodes hold `M cos(theta)` ([`crate::brdf::table::TablePart::cos_weighted`]).
     pub cos_weighted: bool,
-    /// Instead of a table: the single term evaluated in the kernel (`data` empty, `n_z`
-    /// 0).
-    pub shader: Option<&'a crate::brdf::table::SingleParams>,
+    /// Instead of a table: a part evaluated in the kernel (`data` empty, `n_z` 0).
+    pub shader: Option<InKernel<'a>>,
+}
+
+/// A part the kernel evaluates from parameters instead of a table.
+#[derive(Clone, Copy)]
+pub enum InKernel<'a> {
+    Single(&'a crate::brdf::table::SingleParams),
+    Lambertian(&'a crate::brdf::table::LambertianParams),
 }
 
 impl<'a> From<&'a crate::brdf::table::TablePart> for PartRef<'a> {
@@ -672,26 +679,28 @@ impl<'a> From<&'a crate::brdf::table::TablePart> for PartRef<'a> {
     }
 }
 
-impl PartRef<'_> {
+impl<'a> PartRef<'a> {
     /// The parts of a material's table as the kernel reads them: the single term first
     /// (tabulated or, [`crate::brdf::table::BrdfTable::single`], evaluated in the kernel),
     /// then the other parts.
-    pub fn of(t: &crate::brdf::table::BrdfTable) -> Vec<PartRef<'_>> {
-        let single = t.single.iter().map(PartRef::from);
-        single.chain(t.parts.iter().map(PartRef::from)).collect()
-    }
-}
-
-impl<'a> From<&'a crate::brdf::table::SingleParams> for PartRef<'a> {
-    fn from(p: &'a crate::brdf::table::SingleParams) -> Self {
-        PartRef {
+    pub fn of(t: &'a crate::brdf::table::BrdfTable) -> Vec<PartRef<'a>> {
+        let in_kernel = |k: InKernel<'a>| PartRef {
             scale: 0.0,
             n_z: 0,
             n_psi: 0,
             data: &[],
             cos_weighted: false,
-            shader: Some(p),
-        }
+            shader: Some(k),
+        };
+        let single = t.single.iter().map(|p| in_kernel(InKernel::Single(p)));
+        let lambertian = t
+            .lambertian
+            .iter()
+            .map(|p| in_kernel(InKernel::Lambertian(p)));
+        single
+            .chain(lambertian)
+            .chain(t.parts.iter().map(PartRef::from))
+            .collect()
     }
 }
 
@@ -700,7 +709,7 @@ impl GpuTables {
     pub fn pack(materials: &[Vec<PartRef<'_>>], beta: f64) -> Result<Self> {
         let mut data = vec![0.0f32; HEADER_WORDS * materials.len()];
         let mut max_m00 = 0.0f64;
-        let mut single_in_shader = false;
+        let mut in_shader = false;
         for (m, parts) in materials.iter().enumerate() {
             if parts.len() > MAX_PARTS {
                 return Err(Error::Shape(format!(
@@ -710,14 +719,22 @@ impl GpuTables {
             }
             let mut sum_max = 0.0;
             for (p, part) in parts.iter().enumerate() {
-                if let Some(sp) = part.shader {
+                if let Some(k) = part.shader {
                     let h = HEADER_WORDS * m + 4 * p;
                     data[h] = f32::from_bits(data.len() as u32);
                     data[h + 1] = f32::from_bits(0);
                     data[h + 2] = f32::from_bits(SHADER_PART);
-                    data.extend(sp.words());
-                    sum_max += SHADER_PART_MARGIN * sp.max_m00_cos(beta);
-                    single_in_shader = true;
+                    match k {
+                        InKernel::Single(sp) => {
+                            data.extend(sp.words());
+                            sum_max += SHADER_PART_MARGIN * sp.max_m00_cos(beta);
+                        }
+                        InKernel::Lambertian(lp) => {
+                            data.extend(lp.words());
+                            sum_max += lp.max_m00_cos();
+                        }
+                    }
+                    in_shader = true;
                     continue;
                 }
                 let rows = part.n_psi + 1;
@@ -785,7 +802,7 @@ impl GpuTables {
         Ok(GpuTables {
             data,
             max_m00,
-            single_in_shader,
+            in_shader,
         })
     }
 }
@@ -1180,7 +1197,7 @@ fn render_chunks(
         elements: sensor.element_mask(),
         samples: sensor.samples as u32,
         analytic: sensor.analytic,
-        single_in_shader: tables.single_in_shader,
+        in_shader: tables.in_shader,
     };
     let rng_stride = if kern.footprint { 4 } else { 2 };
     let n_s = sensor.samples;
@@ -2174,16 +2191,17 @@ pub(crate) mod twin_tests {
         }
     }
 
-    /// The single term evaluated in the kernel (`single_in_shader`, no single-term table)
-    /// against its f64 twin ([`crate::brdf::table::SingleParams::eval`]) and the twin
+    /// The single, multiple and diffuse terms evaluated in the kernel (`in_shader`: no
+    /// tables for them) against their f64 twins ([`crate::brdf::table::SingleParams::eval`],
+    /// [`crate::brdf::table::LambertianParams::eval`]) and the twin
     /// against the exact core BRDF, per pixel, monostatic and 2 deg bistatic, on the
     /// oblique smooth sphere, for materials that span the model's switches and extremes:
     /// APS with the seed's and APS correlation (the material's own masking table, so the
     /// twin is the core to rounding), Smith GGX and Beckmann (their closed forms through a
     /// 1D table of 512 nodes), a perfect conductor, eta near 1 and a large |eta|, alpha
-    /// 0.02 and 2, and single + multiple (the multiple term from its table).
+    /// 0.02 and 2, and single + multiple (+ diffuse, whose albedo table is in `zeta`).
     #[test]
-    fn single_in_shader_matches_twin_and_core_per_pixel() {
+    fn in_shader_matches_twin_and_core_per_pixel() {
         use crate::microfacet::{Correlation, Shadowing};
         let gpu = context(DeviceChoice::Auto).expect("a Vulkan device (lavapipe)");
         let mesh = uv_sphere(0.5, 48, 96);
@@ -2235,18 +2253,28 @@ pub(crate) mod twin_tests {
                 "APS Beckmann 0.3 Al, single + multiple",
                 spec(beckmann(0.3), al, &|s| s.terms.multiple = true),
             ),
+            (
+                "APS GGX 0.5 paint: single + multiple + diffuse 0.8",
+                spec(ggx(0.5), Eta::new(1.5, 0.0), &|s| {
+                    s.terms.multiple = true;
+                    s.terms.diffuse = true;
+                    s.diffuse_albedo = 0.8;
+                }),
+            ),
         ];
         for (name, mat) in &mats {
             for beta in [0.0, 2f64.to_radians()] {
                 let opts = BrdfTableOptions {
                     frame: Some(TableFrame::Bisector),
-                    single_in_shader: true,
+                    in_shader: true,
                     ..Default::default()
                 };
                 let table = BrdfTable::build(mat, beta, &opts).unwrap();
                 assert!(table.single.is_some() && !table.kinds.contains(&PartKind::Single));
+                assert_eq!(table.lambertian.is_some(), mat.spec.terms.multiple);
+                assert!(table.parts.is_empty());
                 let tables = GpuTables::pack(&[PartRef::of(&table)], beta).unwrap();
-                assert!(tables.single_in_shader);
+                assert!(tables.in_shader);
                 let mut sensor = super::tests::lambert_sensor(64);
                 sensor.bistatic_angle = beta;
                 let out = Outputs {
@@ -2293,15 +2321,10 @@ pub(crate) mod twin_tests {
                 let rms = (d2 / t2).sqrt();
                 eprintln!("{name}, beta {beta:.4}: relative RMS of M00 {rms:.2e}");
                 assert!(rms < 1e-5, "{name}: kernel vs twin RMS {rms}");
-                // the twin is the core but for the masking excess's 1D table (exact for
-                // the APS materials, a 512-node interpolation of the Smith forms) and the
-                // multiple term's 2D table (1e-4, bistatic 2e-4, as in
-                // kernel_matches_twin_and_core_per_pixel); measured 1.2e-7 for Smith GGX
-                let tol = match (mat.spec.terms.multiple, beta > 0.0) {
-                    (false, _) => 1e-6,
-                    (true, false) => 1e-4,
-                    (true, true) => 2e-4,
-                };
+                // the twin is the core but for the masking excess's 1D table (exact for the
+                // APS materials, a 512-node interpolation of the Smith forms: measured
+                // 1.2e-7 for Smith GGX; the images are f32, 6e-8)
+                let tol = 1e-6;
                 assert!(e_tc < tol, "{name}: twin vs core {e_tc}");
                 for k in 0..16 {
                     assert!(
