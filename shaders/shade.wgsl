@@ -300,7 +300,13 @@ fn ndf(kind: u32, r: f32, cos_h: f32, sin2_h: f32) -> f32 {
         } else {
             ln_cos = log(cos_h);
         }
-        return (r + 2.0) / (2.0 * PI) * exp(max(r * ln_cos, LN_FLOOR_F32 - 16.0));
+        // below f32's normal range: zero, as Beckmann's (a floor would light pixels the f64
+        // twin leaves dark)
+        let e = r * ln_cos;
+        if (e < LN_FLOOR_F32) {
+            return 0.0;
+        }
+        return (r + 2.0) / (2.0 * PI) * exp(e);
     }
     let a2 = r * r;
     let c2 = cos_h * cos_h;

@@ -168,20 +168,23 @@ def test_brdf_knob_is_checked():
         pprender.Lidar(brdf="shader", quality="reference")
 
 
-def test_covered_pixels_that_return_nothing_are_zero_in_f32_as_in_f64():
+@pytest.mark.parametrize("dist, brdf", [("beckmann", "table"), ("beckmann", "shader"), ("blinn_phong", "shader")])
+def test_covered_pixels_that_return_nothing_are_zero_in_f32_as_in_f64(dist: str, brdf: str) -> None:
     """Near the limb of a glossy sphere ln M00 falls below f32's range (Beckmann alpha 0.2:
-    tan(theta)^2 / alpha^2 > 87 past 62 deg): where the f64 twin returns 0 the kernel must
-    too, not a floor value (it once returned exp(-87) x the pixel's weight, ~1e-42, which
-    counted as lit pixels in image metrics)."""
-    glossy = pprender.Material("beckmann", alpha=0.2, eta=1.38 + 10.2j, terms=["single"])
+    tan(theta)^2 / alpha^2 > 87 past 62 deg): where the f64 twin returns 0 (or less than
+    f32's smallest subnormal) the kernel must too, not a floor value (the table path once
+    returned exp(-87) x the pixel's weight, ~1e-42, which counted as lit pixels in image
+    metrics; the in-kernel Blinn-Phong D had a floor of exp(-103) x (m + 2) / 2 pi)."""
+    rough = {"alpha": 0.2} if dist == "beckmann" else {"m": 200.0}
+    glossy = pprender.Material(dist, eta=1.38 + 10.2j, terms=["single"], **rough)
     scene = _sphere_scene(glossy)
     q = np.array([[1.0, 0, 0, 0]])
     r = {a: pprender.render(scene, pprender.Lidar(resolution=48, pixel_samples=1, polarization=[1, 0, 0, 0],
-                                                  arithmetic=a), q, outputs=("stokes", "range"))
+                                                  arithmetic=a, brdf=brdf), q, outputs=("stokes", "range"))
          for a in ("f32", "f64")}
     s0 = {a: r[a].stokes[0, ..., 0] for a in r}
     np.testing.assert_array_equal(r["f32"].coverage, r["f64"].coverage)
-    dark = (r["f64"].coverage[0] > 0) & (s0["f64"] == 0)
+    dark = (r["f64"].coverage[0] > 0) & (s0["f64"] < 1e-45)
     assert dark.sum() > 50  # the limb: covered, returning nothing
     np.testing.assert_array_equal(s0["f32"][dark], 0.0)
     # and what is in f32's normal range in f64 is lit in f32 (between, ~1e-45 to 1e-38,
