@@ -142,23 +142,23 @@ fn mirror_sign(e: u32) -> f32 {
     return di * dj;
 }
 
-// Catmull-Rom in z along one psi row, element e (ghost nodes by quadratic extrapolation).
+// Catmull-Rom on interval i of n, nodes q0 = v[max(i, 1) - 1], p1 = v[i], p2 = v[i + 1],
+// q3 = v[min(i + 2, n)], with the end ghost nodes by quadratic extrapolation (v[-1] =
+// 3 v[0] - 3 v[1] + v[2], v[n + 1] = 3 v[n] - 3 v[n - 1] + v[n - 2]; table.rs
+// catmull_rom_ends).
+fn catmull_rom_ends(q0: f32, p1: f32, p2: f32, q3: f32, i: u32, n: u32, t: f32) -> f32 {
+    let p0 = select(q0, 3.0 * p1 - 3.0 * p2 + q3, i == 0u);
+    let p3 = select(q3, 3.0 * p2 - 3.0 * p1 + q0, i + 2u > n);
+    return catmull_rom(p0, p1, p2, p3, t);
+}
+
+// Catmull-Rom in z along one psi row, element e.
 fn interp_z(base: u32, row: u32, n_z: u32, i: u32, t: f32, e: u32) -> f32 {
     let p1 = tval(base, row, i, n_z, e);
     let p2 = tval(base, row, i + 1u, n_z, e);
-    var p0: f32;
-    if (i > 0u) {
-        p0 = tval(base, row, i - 1u, n_z, e);
-    } else {
-        p0 = 3.0 * p1 - 3.0 * p2 + tval(base, row, min(i + 2u, n_z), n_z, e);
-    }
-    var p3: f32;
-    if (i + 2u <= n_z) {
-        p3 = tval(base, row, i + 2u, n_z, e);
-    } else {
-        p3 = 3.0 * p2 - 3.0 * p1 + tval(base, row, max(i, 1u) - 1u, n_z, e);
-    }
-    var v = catmull_rom(p0, p1, p2, p3, t);
+    let q0 = tval(base, row, max(i, 1u) - 1u, n_z, e);
+    let q3 = tval(base, row, min(i + 2u, n_z), n_z, e);
+    var v = catmull_rom_ends(q0, p1, p2, q3, i, n_z, t);
     if (e == 0u) {
         v = clamp(v, min(p1, p2), max(p1, p2));
     }
@@ -330,22 +330,8 @@ fn z_of(scale: f32, c: f32, s: f32) -> f32 {
 fn table_1d(v: u32, n: u32, z: f32) -> f32 {
     let x = z * f32(n);
     let i = min(u32(x), n - 1u);
-    let t = x - f32(i);
-    let p1 = tables[v + i];
-    let p2 = tables[v + i + 1u];
-    var p0: f32;
-    if (i > 0u) {
-        p0 = tables[v + i - 1u];
-    } else {
-        p0 = 3.0 * p1 - 3.0 * p2 + tables[v + min(i + 2u, n)];
-    }
-    var p3: f32;
-    if (i + 2u <= n) {
-        p3 = tables[v + i + 2u];
-    } else {
-        p3 = 3.0 * p2 - 3.0 * p1 + tables[v + max(i, 1u) - 1u];
-    }
-    return catmull_rom(p0, p1, p2, p3, t);
+    return catmull_rom_ends(tables[v + max(i, 1u) - 1u], tables[v + i], tables[v + i + 1u],
+                            tables[v + min(i + 2u, n)], i, n, x - f32(i));
 }
 
 // The masking excess N at (cos, sin) from the material's 1D table.
