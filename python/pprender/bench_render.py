@@ -9,7 +9,8 @@ multiple), glass-covered cells (alpha 0.05), white-painted panel backs and an al
 antenna, monostatic at 1064 nm, 100 ps pulse, 128x128 pixels, one visibility sample per pixel
 (``pixel_samples=1``, the ``"fast"`` sampling; two rows show 4 and 8, the ``"balanced"``
 default; two more the kernel's f64 CPU twin, ``arithmetic="f64"``, which runs natively with
-rayon instead of on the device) (and the same pulse as samples every
+rayon instead of on the device; three ``brdf="shader"``, the single, multiple and diffuse
+terms evaluated per pixel in the kernel instead of looked up) (and the same pulse as samples every
 5 ps, whose profile takes the sampled-pulse path: accumulated on the host in f64). A realization is one
 attitude. Rates are batch size / best wall time of ``--repeats`` calls of a batch of random
 attitudes; the one-off costs (device creation, shader compilation, material tables) are
@@ -77,14 +78,29 @@ def best_time(f: Any, repeats: int) -> tuple[float, float]:
     return min(ts), float(np.median(ts))
 
 
-def _memory_child(n: int, device: str) -> None:
+def _peak_rss_mb() -> float:
+    """This process's peak resident set (MB): ``VmHWM`` of /proc/self/status where there is
+    one. Not ``getrusage``'s ``ru_maxrss``: Linux carries the parent's peak into a child
+    spawned by (v)fork + exec, so a fresh process reported the benchmark's own size (541 to
+    721 MB where the child itself peaks near 250)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
     import resource
 
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _memory_child(n: int, device: str) -> None:
     scene = cubesat_scene()
     sensor = pprender.Lidar(resolution=RES, pixel_samples=1)
     q = random_quaternions(n)
     pprender.render(scene, sensor, q, outputs=("profile",), device=device)
-    print(json.dumps({"n": n, "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+    print(json.dumps({"n": n, "maxrss_mb": _peak_rss_mb()}))
 
 
 def memory_vs_n(ns: list[int], device: str) -> list[dict[str, Any]]:
@@ -187,6 +203,10 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
         ), ("profile",)),
         ("profile only, intensity of an unpolarized transmitter (M00 alone)", pprender.Lidar(
             resolution=RES, pixel_samples=1, polarization=[1, 0, 0, 0], intensity_only=True), ("profile",)),
+        ("profile only (Stokes), terms evaluated in the kernel (`brdf=\"shader\"`; double bounce tabulated)",
+         pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0], brdf="shader"), ("profile",)),
+        ("full model, terms evaluated in the kernel (`brdf=\"shader\"`)", pprender.Lidar(
+            resolution=RES, pixel_samples=1, brdf="shader"), ("profile", "mueller", "range")),
         ("profile only (Stokes), f64 CPU twin (`arithmetic=\"f64\"`, native, no device)", pprender.Lidar(
             resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0], arithmetic="f64"), ("profile",)),
         ("profile only (Stokes), 8 visibility samples per pixel, f64 CPU twin", pprender.Lidar(
@@ -198,6 +218,8 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
     special = [
         ("profile only (Stokes), single bounce only", pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0]),
          ("profile",)),
+        ("profile only (Stokes), single bounce only, evaluated in the kernel", pprender.Lidar(
+            resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0], brdf="shader"), ("profile",)),
     ]
     t0 = time.perf_counter()
     pprender.render(scene, cases[0][1], q[:1], outputs=cases[0][2], device=device)
