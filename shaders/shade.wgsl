@@ -2,8 +2,10 @@
 //
 // For the pixel's visible triangle (from the visibility pass) it intersects the pixel-centre
 // ray, takes the (optionally interpolated) normal facing the receiver, looks the material's
-// Mueller BRDF up in its table (sp frame, see src/brdf/table.rs), rotates it to the
-// telescope bases and scales it to the differential lidar cross-section
+// Mueller BRDF up in its table (bisector frame, see src/brdf/table.rs) or, for the terms
+// the material has no table of (IN_SHADER, Lidar(brdf="shader")), evaluates them here in
+// the same frame, rotates it to the telescope bases and scales it to the differential
+// lidar cross-section
 // dsigma = 4 pi f cos(theta_i) delta^2 (m^2; delta^2 the pixel's projected area). Then,
 // each behind an override constant, it writes the image channels and the range, adds the
 // pixel to the range-resolved profile with its sub-pixel range extent and the pulse

@@ -395,9 +395,8 @@ impl SingleParams {
     /// The words the kernel reads (`add_single_in_kernel` in `shaders/shade.wgsl`):
     /// `[0 (the kind; u32 bits), distribution (0 Blinn-Phong, 1 Beckmann, 2 GGX; u32
     /// bits), m or alpha, perfect conductor (u32 bits), n - 1, k, excess table scale,
-    /// correlation (0 none,
-    /// 1 seed, 2 APS; u32 bits), intervals of the excess table (u32 bits), its n + 1
-    /// values]`. `n - 1` is rounded from f64, so that `eta` near 1 keeps its relative
+    /// correlation (0 none, 1 seed, 2 APS; u32 bits), intervals of the excess table (u32
+    /// bits), its n + 1 values]`. `n - 1` is rounded from f64, so that `eta` near 1 keeps its relative
     /// accuracy in `eta^2 - 1 = (n - 1 + i k)(n + 1 + i k)`.
     pub fn words(&self) -> Vec<f32> {
         let u = |x: u32| f32::from_bits(x);

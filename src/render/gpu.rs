@@ -101,7 +101,7 @@ struct ShadeKey {
     samples: u32,
     /// Analytic coverage ([`SensorSetup::analytic`]).
     analytic: bool,
-    /// Some material's single term is evaluated in the kernel ([`GpuTables`]).
+    /// Some material's terms are evaluated in the kernel ([`GpuTables::in_shader`]).
     in_shader: bool,
 }
 
@@ -628,8 +628,8 @@ pub struct GpuTables {
     /// that grew toward grazing could still exceed the bound in the last cell, within
     /// `atan(1 / (scale n_z))` of grazing, where the clamp would touch it.)
     pub max_m00: f64,
-    /// Some material's single term is evaluated in the kernel
-    /// ([`crate::brdf::table::SingleParams`]): the kernel's `IN_SHADER`.
+    /// Some material's terms are evaluated in the kernel ([`InKernel`]): the kernel's
+    /// `IN_SHADER`.
     pub in_shader: bool,
 }
 
@@ -680,9 +680,10 @@ impl<'a> From<&'a crate::brdf::table::TablePart> for PartRef<'a> {
 }
 
 impl<'a> PartRef<'a> {
-    /// The parts of a material's table as the kernel reads them: the single term first
-    /// (tabulated or, [`crate::brdf::table::BrdfTable::single`], evaluated in the kernel),
-    /// then the other parts.
+    /// The parts of a material's table as the kernel reads them: with
+    /// [`crate::brdf::table::BrdfTableOptions::in_shader`] the single and the multiple +
+    /// diffuse terms evaluated in the kernel, then the tabulated parts (single, multiple
+    /// + diffuse, double: those the table holds).
     pub fn of(t: &'a crate::brdf::table::BrdfTable) -> Vec<PartRef<'a>> {
         let in_kernel = |k: InKernel<'a>| PartRef {
             scale: 0.0,
