@@ -342,25 +342,36 @@ fn excess(blk: u32, c: f32, s: f32) -> f32 {
     return max(table_1d(blk + 9u, bitcast<u32>(tables[blk + 8u]), z), 0.0);
 }
 
+// What the in-kernel terms share at a shaded point, computed once (shade_at): the cosines
+// of wi and wo to the normal, n x wi and n x wo (their lengths the sines: accurate near the
+// normal, where 1 - cos^2 is not), and the bisector h with its cos and sin^2 to n.
+struct Local {
+    ci: f32,
+    co: f32,
+    ui: vec3<f32>,
+    uo: vec3<f32>,
+    si: f32,
+    so: f32,
+    h: vec3<f32>,
+    cos_h: f32,
+    sin2_h: f32,
+}
+
 // Adds the single term times cos(theta_i), M cos_i = D F (G / cos_o) / 4 (in the beam
-// bases x_in, x_out; y = k x x), at the unit normal n for wi, wo above it, to acc (the
+// bases x_in, x_out; y = k x x), at the point g (Local) for wi, wo above it, to acc (the
 // elements in ELEMENT_MASK). G / cos_o is formed without dividing by cos_i, so that it
 // stays finite at grazing incidence: (1 - f) P_i Q_o + f min(P_i, P_o) / cos_o, Q = P / cos.
-fn add_single_in_kernel(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_in: vec3<f32>,
+fn add_single_in_kernel(blk: u32, g: Local, wi: vec3<f32>, wo: vec3<f32>, x_in: vec3<f32>,
                         x_out: vec3<f32>, acc: ptr<function, array<f32, 16>>) {
-    let h = safe_normalize(wi + wo, n);
-    let nxh = cross(n, h);
-    let d = ndf(bitcast<u32>(tables[blk + 1u]), tables[blk + 2u], dot(n, h), dot(nxh, nxh));
+    let d = ndf(bitcast<u32>(tables[blk + 1u]), tables[blk + 2u], g.cos_h, g.sin2_h);
     if (!(d > 0.0)) {
         return;
     }
-    let ci = dot(n, wi);
-    let co = dot(n, wo);
-    // horizontal parts by cross products (accurate near the normal; n x w has length sin)
-    let ui = cross(n, wi);
-    let uo = cross(n, wo);
-    let si = length(ui);
-    let so = length(uo);
+    let h = g.h;
+    let ci = g.ci;
+    let co = g.co;
+    let si = g.si;
+    let so = g.so;
     let qi = 1.0 / (ci + excess(blk, ci, si));
     let qo = 1.0 / (co + excess(blk, co, so));
     let corr = bitcast<u32>(tables[blk + 7u]);
@@ -368,7 +379,7 @@ fn add_single_in_kernel(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_
     if (corr != 0u) {
         f = 1.0;
         if (si > 0.0 && so > 0.0) {
-            let cos_phi = clamp(dot(ui, uo) / (si * so), -1.0, 1.0);
+            let cos_phi = clamp(dot(g.ui, g.uo) / (si * so), -1.0, 1.0);
             if (corr == 1u) {
                 f = sqrt(max(0.5 * (1.0 + cos_phi), 0.0));
             } else {
@@ -444,12 +455,11 @@ fn add_single_in_kernel(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>, x_
 // from the material's albedo table E. Words at `blk` (LambertianParams::words): kind 1,
 // the z scale, the number of terms, then per term c, s_f (0: E in z; else in
 // zeta = (z + z_1 + z_sf) / 3, material.rs zeta_of), intervals, values.
-fn add_lambertian_in_kernel(blk: u32, n: vec3<f32>, wi: vec3<f32>, wo: vec3<f32>,
-                            acc: ptr<function, array<f32, 16>>) {
-    let ci = dot(n, wi);
-    let co = dot(n, wo);
-    let si = length(cross(n, wi));
-    let so = length(cross(n, wo));
+fn add_lambertian_in_kernel(blk: u32, g: Local, acc: ptr<function, array<f32, 16>>) {
+    let ci = g.ci;
+    let co = g.co;
+    let si = g.si;
+    let so = g.so;
     let scale = tables[blk + 1u];
     let zi = z_of(scale, ci, si);
     let zo = z_of(scale, co, so);
@@ -971,7 +981,7 @@ fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32
             for (var part = 0u; part < MAX_PARTS; part++) {
                 let sw = tables[mat * HEADER_WORDS + part * 4u + 3u];
                 let scale = abs(sw);
-                let z = cos_t / max(scale * sin_t + cos_t, 1e-30);
+                let z = z_of(scale, cos_t, sin_t);
                 // cos_i / cos_t <= 2 cos(beta/2) while lit (1 at beta = 0)
                 let w = select(cos_i, min(cos_i / max(cos_t, 1e-30), 2.0), sw < 0.0);
                 add_part(mat, part, z, psi, w, &m);
@@ -989,14 +999,24 @@ fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32
             let y_out = cross(wo, x_out);
             // the parts evaluated here instead of looked up (their kind is their first word)
             if (IN_SHADER) {
+                var g: Local;
+                g.ci = cos_i;
+                g.co = cos_o;
+                g.ui = cross(n, wi);
+                g.uo = cross(n, wo);
+                g.si = length(g.ui);
+                g.so = length(g.uo);
+                g.h = b;
+                g.cos_h = cos_t;
+                g.sin2_h = sin_t * sin_t;
                 for (var part = 0u; part < MAX_PARTS; part++) {
                     let hw = mat * HEADER_WORDS + part * 4u;
                     if (bitcast<u32>(tables[hw + 2u]) == SHADER_PART) {
                         let blk = bitcast<u32>(tables[hw]);
                         if (bitcast<u32>(tables[blk]) == 0u) {
-                            add_single_in_kernel(blk, n, wi, wo, x_in, x_out, &m);
+                            add_single_in_kernel(blk, g, wi, wo, x_in, x_out, &m);
                         } else {
-                            add_lambertian_in_kernel(blk, n, wi, wo, &m);
+                            add_lambertian_in_kernel(blk, g, &m);
                         }
                     }
                 }
