@@ -2125,6 +2125,31 @@ pub(crate) mod twin_tests {
         (w, k)
     }
 
+    /// One material's render by the kernel on its packed `table`, by the f64 twin on the
+    /// same table (as `Lidar(arithmetic="f64")` runs it) and by the twin with the exact
+    /// core BRDF of `mat`, on the 64-pixel sensor at `beta`.
+    fn kernel_twin_core(
+        gpu: &Gpu,
+        mesh: &Mesh,
+        rot: &[Rot],
+        mat: &Material,
+        table: &BrdfTable,
+        beta: f64,
+        out: Outputs,
+    ) -> (Rendered, Rendered, Rendered) {
+        let tables = GpuTables::pack(&[PartRef::of(table)], beta).unwrap();
+        assert_eq!(tables.in_shader, table.single.is_some() || table.lambertian.is_some());
+        let mut sensor = super::tests::lambert_sensor(64);
+        sensor.bistatic_angle = beta;
+        let g = render(gpu, mesh, &tables, &sensor, rot, out).unwrap();
+        let by_table = twin::Tables(std::slice::from_ref(table));
+        let by_core =
+            |_m: usize, wi: [f64; 3], wo: [f64; 3]| crate::brdf::eval(mat, wi, wo, Frame::Sp);
+        let t = twin::render_cpu(mesh, &sensor, rot, out, &by_table);
+        let c = twin::render_cpu(mesh, &sensor, rot, out, &by_core);
+        (g, t, c)
+    }
+
     /// The kernel (f32, lavapipe or GPU) against its f64 twin with the same tables, and the
     /// twin with the tables against the exact core BRDF, per pixel, monostatic and 2 deg
     /// bistatic, on a smooth-shaded sphere at an oblique attitude.
@@ -2143,21 +2168,12 @@ pub(crate) mod twin_tests {
                 ..Default::default()
             };
             let table = BrdfTable::build(&mat, beta, &opts).unwrap();
-            let tables = GpuTables::pack(&[PartRef::of(&table)], beta).unwrap();
-            let mut sensor = super::tests::lambert_sensor(64);
-            sensor.bistatic_angle = beta;
             let out = Outputs {
                 image: true,
                 range: true,
                 profile: true,
             };
-            let g = render(&gpu, &mesh, &tables, &sensor, &rot, out).unwrap();
-            // the twin as `Lidar(arithmetic="f64")` runs it
-            let by_table = twin::Tables(std::slice::from_ref(&table));
-            let by_core =
-                |_m: usize, wi: [f64; 3], wo: [f64; 3]| crate::brdf::eval(&mat, wi, wo, Frame::Sp);
-            let t = twin::render_cpu(&mesh, &sensor, &rot, out, &by_table);
-            let c = twin::render_cpu(&mesh, &sensor, &rot, out, &by_core);
+            let (g, t, c) = kernel_twin_core(&gpu, &mesh, &rot, &mat, &table, beta, out);
             let (gi, ti, ci) = (
                 g.image.as_ref().unwrap(),
                 t.image.as_ref().unwrap(),
@@ -2274,22 +2290,12 @@ pub(crate) mod twin_tests {
                 assert!(table.single.is_some() && !table.kinds.contains(&PartKind::Single));
                 assert_eq!(table.lambertian.is_some(), mat.spec.terms.multiple);
                 assert!(table.parts.is_empty());
-                let tables = GpuTables::pack(&[PartRef::of(&table)], beta).unwrap();
-                assert!(tables.in_shader);
-                let mut sensor = super::tests::lambert_sensor(64);
-                sensor.bistatic_angle = beta;
                 let out = Outputs {
                     image: true,
                     range: false,
                     profile: true,
                 };
-                let g = render(&gpu, &mesh, &tables, &sensor, &rot, out).unwrap();
-                let by_table = twin::Tables(std::slice::from_ref(&table));
-                let by_core = |_m: usize, wi: [f64; 3], wo: [f64; 3]| {
-                    crate::brdf::eval(mat, wi, wo, Frame::Sp)
-                };
-                let t = twin::render_cpu(&mesh, &sensor, &rot, out, &by_table);
-                let c = twin::render_cpu(&mesh, &sensor, &rot, out, &by_core);
+                let (g, t, c) = kernel_twin_core(&gpu, &mesh, &rot, mat, &table, beta, out);
                 let (gi, ti, ci) = (
                     g.image.as_ref().unwrap(),
                     t.image.as_ref().unwrap(),
