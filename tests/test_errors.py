@@ -53,6 +53,22 @@ def test_error_is_value_error() -> None:
         (dict(m=1.0, diffuse_albedo=NAN), "diffuse_albedo"),
         (dict(m=1.0, terms=("single", "diffuse")), "diffuse_albedo"),
         (dict(distribution="beckmann", alpha=0.2, masking="seed"), "masking"),
+        # Wrong types (issue 21): a raw TypeError from PyO3 named nothing.
+        (dict(distribution="beckmann", alpha="0.2"), "alpha"),
+        (dict(m="10"), "m"),
+        (dict(m=1.0, eta="1.5+2j"), "eta"),
+        (dict(m=1.0, eta=None), "eta"),
+        (dict(m=1.0, terms="single"), "terms"),
+        (dict(m=1.0, terms=None), "terms"),
+        (dict(m=1.0, terms=(1, 2)), "terms"),
+        (dict(m=1.0, diffuse_albedo="0.5"), "diffuse_albedo"),
+        (dict(m=1.0, double_order=48.5), "double_order"),
+        (dict(m=1.0, wavelength="1064e-9"), "wavelength"),
+        (dict(m=1.0, correlation_length=None), "correlation_length"),
+        (dict(m=1.0, shadowing=None), "shadowing"),
+        (dict(m=1.0, name=3), "name"),
+        (dict(m=1.0, coherent_backscatter="yes"), "coherent_backscatter"),
+        (dict(distribution=None, m=1.0), "distribution"),
     ],
 )
 def test_bad_material(kwargs: dict, name: str) -> None:

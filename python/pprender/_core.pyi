@@ -16,40 +16,8 @@ class Error(ValueError): ...
 class Material:
     """A polarized microfacet material.
 
-    Material(distribution="blinn_phong", *, m=None, alpha=None, eta=1.5+0j,
-             shadowing="aps", correlation=None, smith_g1="exact", masking="table",
-             terms=("single", "multiple"), diffuse_albedo=0.0, name=None)
-
-    distribution: "blinn_phong" (roughness exponent ``m`` in [0, 1e10]; m = 0 is
-        Lambertian-like, m -> inf a mirror), "beckmann" or "ggx" (``alpha`` in
-        [1e-5, 10]). Giving ``m`` to Beckmann/GGX or ``alpha`` to Blinn-Phong converts
-        with alpha = sqrt(2/(m+2)) (so Blinn-Phong takes ``alpha`` in [1.414214e-5, 1]).
-    eta: complex index n + ik of the surface (n > 0, k >= 0, ``|eta| <= 1e10``);
-        ``eta=inf`` is a perfect conductor (rs = -1, rp = 1: F = 1, the white-furnace
-        material).
-    shadowing: "aps" (Ashikhmin-Premoze-Shirley P(k), seed eq. 6-7), "smith"
-        (Smith G1 product) or "none" (single term only).
-    correlation: f(phi) of seed eq. 6: "seed" (cos(phi/2)), "aps" (exp(-7.3 phi^2)) or
-        "none"; default "seed" for APS and "none" for Smith.
-    smith_g1: "exact" or "walter" (Walter et al. 2007 rational approximation, as in
-        Mitsuba 3) for the Beckmann/Blinn-Phong Smith G1. For Blinn-Phong "exact" is the
-        Smith function of the Blinn-Phong distribution itself (Lambda = N_D / cos, the
-        uncorrelated APS masking) and "walter" Walter et al.'s recipe through Beckmann
-        with alpha = sqrt(2/(m+2)), which is not energy conserving below m ~ 20
-        (white-furnace albedo 1.34 at grazing for m = 0).
-    masking: how the APS masking integral is evaluated: "table" (per-material cubic
-        table, error below 1e-8), "exact" (quadrature at each call) or "seed" (the seed's
-        closed form, Blinn-Phong only; error in docs/seed-approximation.md).
-    terms: any of "single", "double" (two facet reflections, src/brdf/double.rs),
-        "multiple" (energy-conserving depolarizing multiple scattering: what single and
-        double do not reflect), "diffuse" (Lambertian under-layer with ``diffuse_albedo``).
-    double_order: quadrature order of the double-bounce integral (per dimension; default
-        160, within 1e-4 of the term's M00 on docs/double-bounce-benchmark.md's pairs).
-    coherent_backscatter: add the coherent-backscatter enhancement to the double bounce,
-        with width set by ``wavelength`` (m) and ``correlation_length`` (m, the rms
-        lateral separation of the two facets).
-    double_masking: "seed" (the material's correlated masking in the double bounce's
-        hit/escape probabilities: seed eq. 17, made reciprocal) or "uncorrelated".
+    The parameters, their ranges and defaults are documented once, on the class in the
+    extension (``src/python/brdf.rs``): ``help(pprender.Material)``.
     """
 
     def __new__(
@@ -256,6 +224,8 @@ class RenderScene:
     ) -> RenderScene: ...
     @property
     def radius(self) -> float: ...
+    @property
+    def bounds(self) -> tuple[list[float], list[float]]: ...
     @property
     def n_faces(self) -> int: ...
     def prepare(

@@ -14,7 +14,82 @@ use rayon::prelude::*;
 use std::str::FromStr;
 use std::sync::Arc;
 
-/// A polarized microfacet material (see the Python docstring in `_core.pyi`).
+/// Per-parameter extractors for `Material(...)` (see `args`: strings, `None` or wrong
+/// types raise `pprender.Error` naming the parameter).
+mod material_args {
+    use crate::optics::fresnel::C64;
+    use crate::python::args;
+    use pyo3::prelude::*;
+    macro_rules! arg {
+        ($f:ident, $kind:ident, $t:ty) => {
+            pub fn $f(obj: &Bound<'_, PyAny>) -> PyResult<$t> {
+                args::$kind(stringify!($f), obj)
+            }
+        };
+    }
+    arg!(distribution, name, String);
+    arg!(m, opt_real, Option<f64>);
+    arg!(alpha, opt_real, Option<f64>);
+    arg!(eta, complex, C64);
+    arg!(shadowing, name, String);
+    arg!(correlation, opt_name, Option<String>);
+    arg!(smith_g1, name, String);
+    arg!(masking, name, String);
+    arg!(terms, names, Vec<String>);
+    arg!(diffuse_albedo, real, f64);
+    arg!(name, opt_name, Option<String>);
+    arg!(double_order, count, usize);
+    arg!(coherent_backscatter, flag, bool);
+    arg!(double_masking, name, String);
+    arg!(wavelength, real, f64);
+    arg!(correlation_length, real, f64);
+}
+
+/// A polarized microfacet material.
+///
+/// Material(distribution="blinn_phong", *, m=None, alpha=None, eta=1.5+0j,
+///          shadowing="aps", correlation=None, smith_g1="exact", masking="table",
+///          terms=("single", "multiple"), diffuse_albedo=0.0, name=None,
+///          double_order=160, coherent_backscatter=True, double_masking="seed",
+///          wavelength=1.064e-6, correlation_length=1e-5)
+///
+/// distribution: "blinn_phong" (roughness exponent ``m`` in [0, 1e10]; m = 0 is
+///     Lambertian-like, m -> inf a mirror), "beckmann" or "ggx" (``alpha`` in
+///     [1e-5, 10]). Giving ``m`` to Beckmann/GGX or ``alpha`` to Blinn-Phong converts
+///     with alpha = sqrt(2/(m+2)) (so Blinn-Phong takes ``alpha`` in [1.414214e-5, 1]).
+/// eta: complex index n + ik of the surface (n > 0, k >= 0, ``|eta| <= 1e10``);
+///     ``eta=inf`` is a perfect conductor (rs = -1, rp = 1: F = 1, the white-furnace
+///     material).
+/// shadowing: "aps" (Ashikhmin-Premoze-Shirley P(k), seed eq. 6-7), "smith"
+///     (Smith G1 product) or "none" (single term only).
+/// correlation: f(phi) of seed eq. 6: "seed" (cos(phi/2)), "aps" (exp(-7.3 phi^2)) or
+///     "none"; default "seed" for APS and "none" for Smith.
+/// smith_g1: "exact" or "walter" (Walter et al. 2007 rational approximation, as in
+///     Mitsuba 3) for the Beckmann/Blinn-Phong Smith G1. For Blinn-Phong "exact" is the
+///     Smith function of the Blinn-Phong distribution itself (Lambda = N_D / cos, the
+///     uncorrelated APS masking) and "walter" Walter et al.'s recipe through Beckmann
+///     with alpha = sqrt(2/(m+2)), which is not energy conserving below m ~ 20
+///     (white-furnace albedo 1.34 at grazing for m = 0).
+/// masking: how the APS masking integral is evaluated: "table" (per-material cubic
+///     table, error below 1e-8), "exact" (quadrature at each call) or "seed" (the seed's
+///     closed form, Blinn-Phong only; error in docs/seed-approximation.md).
+/// terms: a sequence of any of "single", "double" (two facet reflections,
+///     src/brdf/double.rs), "multiple" (energy-conserving depolarizing multiple
+///     scattering: what single and double do not reflect), "diffuse" (Lambertian
+///     under-layer with ``diffuse_albedo`` in [0, 1]).
+/// name: a label (pprender.materials sets the material's name).
+/// double_order: quadrature order of the double-bounce integral (per dimension; default
+///     160, within 1e-4 of the term's M00 on docs/double-bounce-benchmark.md's pairs).
+/// coherent_backscatter: add the coherent-backscatter enhancement to the double bounce,
+///     with width set by ``wavelength`` (m) and ``correlation_length`` (m, the rms
+///     lateral separation of the two facets).
+/// double_masking: "seed" (the material's correlated masking in the double bounce's
+///     hit/escape probabilities: seed eq. 17, made reciprocal) or "uncorrelated".
+/// wavelength: the wavelength (m) ``eta`` is for; :func:`pprender.render` refuses a
+///     sensor at another wavelength. pprender.materials.get sets it.
+///
+/// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise
+/// pprender.Error naming the parameter.
 #[pyclass(module = "pprender", name = "Material", frozen)]
 pub struct PyMaterial {
     pub inner: Arc<core_brdf::Material>,
@@ -35,31 +110,46 @@ fn parse_eta(eta: C64) -> crate::Result<Eta> {
 #[pymethods]
 impl PyMaterial {
     #[new]
-    #[pyo3(signature = (distribution="blinn_phong", *, m=None, alpha=None, eta=C64::new(1.5, 0.0),
-        shadowing="aps", correlation=None, smith_g1="exact", masking="table",
+    #[pyo3(signature = (distribution=String::from("blinn_phong"), *, m=None, alpha=None,
+        eta=C64::new(1.5, 0.0), shadowing=String::from("aps"), correlation=None,
+        smith_g1=String::from("exact"), masking=String::from("table"),
         terms=vec!["single".to_string(), "multiple".to_string()], diffuse_albedo=0.0, name=None,
-        double_order=MaterialSpec::DOUBLE_ORDER, coherent_backscatter=true, double_masking="seed",
-        wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH))]
+        double_order=MaterialSpec::DOUBLE_ORDER, coherent_backscatter=true,
+        double_masking=String::from("seed"),
+        wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH),
+        text_signature = "(distribution='blinn_phong', *, m=None, alpha=None, eta=(1.5+0j), \
+shadowing='aps', correlation=None, smith_g1='exact', masking='table', \
+terms=('single', 'multiple'), diffuse_albedo=0.0, name=None, double_order=160, \
+coherent_backscatter=True, double_masking='seed', wavelength=1.064e-06, \
+correlation_length=1e-05)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
-        distribution: &str,
-        m: Option<f64>,
-        alpha: Option<f64>,
-        eta: C64,
-        shadowing: &str,
-        correlation: Option<&str>,
-        smith_g1: &str,
-        masking: &str,
-        terms: Vec<String>,
-        diffuse_albedo: f64,
-        name: Option<String>,
-        double_order: usize,
-        coherent_backscatter: bool,
-        double_masking: &str,
-        wavelength: f64,
-        correlation_length: f64,
+        #[pyo3(from_py_with = material_args::distribution)] distribution: String,
+        #[pyo3(from_py_with = material_args::m)] m: Option<f64>,
+        #[pyo3(from_py_with = material_args::alpha)] alpha: Option<f64>,
+        #[pyo3(from_py_with = material_args::eta)] eta: C64,
+        #[pyo3(from_py_with = material_args::shadowing)] shadowing: String,
+        #[pyo3(from_py_with = material_args::correlation)] correlation: Option<String>,
+        #[pyo3(from_py_with = material_args::smith_g1)] smith_g1: String,
+        #[pyo3(from_py_with = material_args::masking)] masking: String,
+        #[pyo3(from_py_with = material_args::terms)] terms: Vec<String>,
+        #[pyo3(from_py_with = material_args::diffuse_albedo)] diffuse_albedo: f64,
+        #[pyo3(from_py_with = material_args::name)] name: Option<String>,
+        #[pyo3(from_py_with = material_args::double_order)] double_order: usize,
+        #[pyo3(from_py_with = material_args::coherent_backscatter)] coherent_backscatter: bool,
+        #[pyo3(from_py_with = material_args::double_masking)] double_masking: String,
+        #[pyo3(from_py_with = material_args::wavelength)] wavelength: f64,
+        #[pyo3(from_py_with = material_args::correlation_length)] correlation_length: f64,
     ) -> PyResult<Self> {
+        let (distribution, shadowing, smith_g1, masking, double_masking) = (
+            distribution.as_str(),
+            shadowing.as_str(),
+            smith_g1.as_str(),
+            masking.as_str(),
+            double_masking.as_str(),
+        );
+        let correlation = correlation.as_deref();
         let dist = Distribution::new(distribution, m, alpha)?;
         let spec = MaterialSpec {
             distribution: dist,

@@ -2,6 +2,7 @@
 
 use pyo3::prelude::*;
 
+mod args;
 pub mod brdf;
 mod polarimetry;
 mod reference;

@@ -131,6 +131,20 @@ impl PyRenderScene {
         self.mesh.radius
     }
 
+    /// The mesh's axis-aligned bounding box in the body frame, `(min, max)` (m).
+    #[getter]
+    fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for v in &self.mesh.vertices {
+            for k in 0..3 {
+                lo[k] = lo[k].min(v[k]);
+                hi[k] = hi[k].max(v[k]);
+            }
+        }
+        (lo, hi)
+    }
+
     #[getter]
     fn n_faces(&self) -> usize {
         self.mesh.faces.len()
@@ -268,6 +282,9 @@ impl PyRenderScene {
             profile,
         };
         let mesh = self.mesh.clone();
+        if reference || f64_twin {
+            crate::render::twin::check_cpu_render(&mesh, &sensor, rots.len(), outputs)?;
+        }
         let r = py.detach(|| -> crate::Result<_> {
             if reference {
                 let r = crate::render::twin::render_reference(

@@ -968,6 +968,27 @@ impl Layout {
 /// Largest number of profile bins accepted (a sanity bound on `bin_width`).
 pub const MAX_BINS: usize = 1 << 16;
 
+impl Layout {
+    /// Refuse more than [`MAX_BINS`] profile bins (the bins span the bounding sphere about
+    /// the body origin: a mesh far from it needs many).
+    pub fn check_bins(&self, sensor: &SensorSetup) -> Result<()> {
+        if self.n_bins > MAX_BINS {
+            return Err(Error::param(
+                "bin_width",
+                sensor.bin_width,
+                format!(
+                    "a bin width giving at most {MAX_BINS} bins over the object's range extent \
+                     ({:.4} m, the bounding sphere about the body origin; {} bins asked): \
+                     a wider bin_width, or a mesh centred on the body origin",
+                    2.0 * self.ext,
+                    self.n_bins
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Render a batch of attitudes (rotations) of `mesh` with the packed tables.
 pub fn render(
     gpu: &Gpu,
@@ -978,17 +999,7 @@ pub fn render(
     outputs: Outputs,
 ) -> Result<Rendered> {
     let lay = Layout::new(mesh, sensor);
-    if lay.n_bins > MAX_BINS {
-        return Err(Error::param(
-            "bin_width",
-            sensor.bin_width,
-            format!(
-                "a bin width giving at most {MAX_BINS} bins over the object's range extent \
-                 ({:.4} m)",
-                2.0 * lay.ext
-            ),
-        ));
-    }
+    lay.check_bins(sensor)?;
     let w = lay.width;
     // K >= 4: tiles of w + 2 texels (MsaaTiles)
     let margin = if sensor.samples >= MSAA { 2 } else { 0 };

@@ -897,8 +897,14 @@ pub fn analytic_parts(
 /// rendered in parallel; fewer run at a time when theirs would exceed it.
 pub const CPU_MEMORY_BUDGET: usize = 4 << 30;
 
+/// Row blocks of one attitude whose accumulators are held at once: they are rendered
+/// (in parallel) in groups of this many and added in order to the attitude's sums, so a
+/// profile with many bins does not cost a copy per block of the whole image.
+pub const BLOCKS_AT_ONCE: usize = 32;
+
 /// Bytes one attitude of [`render_cpu`] holds at its peak: the K sample id maps, one depth
-/// map while they are drawn, and the requested per-pixel outputs and profile.
+/// map while they are drawn, the requested per-pixel outputs and profile, and the
+/// profiles and pulse-weight scratch of the row blocks held at once ([`BLOCKS_AT_ONCE`]).
 pub fn attitude_bytes(
     width: usize,
     samples: usize,
@@ -907,7 +913,17 @@ pub fn attitude_bytes(
     outputs: Outputs,
 ) -> usize {
     let px = width * width;
-    let mut b = px * (4 * samples + 8);
+    let mut b = px * (4 * samples + 8) + output_bytes(width, channels, n_bins, outputs);
+    let blocks = width.div_ceil(ROWS_PER_BLOCK).min(BLOCKS_AT_ONCE);
+    let profile_channels = if outputs.profile { channels } else { 0 };
+    b += blocks * (profile_channels + 1) * n_bins * 8;
+    b
+}
+
+/// Bytes of one attitude's requested outputs as [`render_cpu`] returns them.
+fn output_bytes(width: usize, channels: usize, n_bins: usize, outputs: Outputs) -> usize {
+    let px = width * width;
+    let mut b = channels * 8;
     if outputs.image {
         b += px * channels * 4;
     }
@@ -918,6 +934,64 @@ pub fn attitude_bytes(
         b += n_bins * channels * 8;
     }
     b
+}
+
+/// Peak memory (bytes) of a CPU render of `n` attitudes: the attitudes rendered at once
+/// ([`attitude_bytes`], [`attitudes_at_once`]) and every attitude's outputs, twice (the
+/// per-attitude results and the batch arrays they are gathered into).
+pub fn render_bytes(mesh: &Mesh, sensor: &SensorSetup, n: usize, outputs: Outputs) -> usize {
+    let lay = Layout::new(mesh, sensor);
+    let (w, ch) = (lay.width, sensor.channels());
+    let one = attitude_bytes(w, sensor.samples, ch, lay.n_bins, outputs);
+    let at_once = attitudes_at_once(one, rayon::current_num_threads()).min(n);
+    at_once
+        .saturating_mul(one)
+        .saturating_add(n.saturating_mul(2 * output_bytes(w, ch, lay.n_bins, outputs)))
+}
+
+/// Memory the system can give without swapping (`MemAvailable` of `/proc/meminfo`), in
+/// bytes; None where it cannot be read (not Linux).
+pub fn available_memory() -> Option<usize> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib.saturating_mul(1024))
+}
+
+/// Refuse a CPU render (the twin or the reference) that would not fit: more profile bins
+/// than the device path accepts ([`Layout::check_bins`]), or more memory than is available
+/// ([`render_bytes`] against [`available_memory`]): an allocation failure would abort
+/// the process, so the render is refused up front with the memory it would need.
+pub fn check_cpu_render(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    n: usize,
+    outputs: Outputs,
+) -> crate::Result<()> {
+    let lay = Layout::new(mesh, sensor);
+    lay.check_bins(sensor)?;
+    let need = render_bytes(mesh, sensor, n, outputs);
+    if let Some(avail) = available_memory() {
+        if need > avail {
+            const GIB: f64 = (1u64 << 30) as f64;
+            return Err(crate::Error::param(
+                "resolution",
+                sensor.resolution,
+                format!(
+                    "this CPU render ({n} attitude(s), {w} x {w} pixels, {k} samples, {b} \
+                     bins) needs about {:.1} GiB of memory and {:.1} GiB are available: \
+                     lower resolution, supersampling or pixel_samples, request fewer outputs, \
+                     or render fewer attitudes per call",
+                    need as f64 / GIB,
+                    avail as f64 / GIB,
+                    w = lay.width,
+                    k = sensor.samples,
+                    b = lay.n_bins,
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// How many attitudes of `bytes` each to render at once on `threads` threads within
@@ -1023,10 +1097,9 @@ impl<'a> Accumulator<'a> {
         }
     }
 
-    /// One attitude's outputs `(image, range, profile, total, coverage)` from the
-    /// accumulators of consecutive pixel ranges, the sums added in their order.
-    #[allow(clippy::type_complexity)]
-    fn concat(blocks: Vec<Self>) -> (Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>) {
+    /// The accumulator of consecutive pixel ranges from theirs, the sums added in their
+    /// order.
+    fn concat(blocks: impl IntoIterator<Item = Self>) -> Self {
         let mut it = blocks.into_iter();
         let mut a = it.next().expect("at least one block");
         for b in it {
@@ -1040,7 +1113,13 @@ impl<'a> Accumulator<'a> {
                 *x += y;
             }
         }
-        (a.img, a.rng, a.prof, a.tot, a.cov)
+        a
+    }
+
+    /// One attitude's outputs `(image, range, profile, total, coverage)`.
+    #[allow(clippy::type_complexity)]
+    fn into_outputs(self) -> (Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>) {
+        (self.img, self.rng, self.prof, self.tot, self.cov)
     }
 }
 
@@ -1130,17 +1209,24 @@ pub fn render_cpu(
         .step_by(ROWS_PER_BLOCK)
         .map(|r| r..(r + ROWS_PER_BLOCK).min(w))
         .collect();
+    // (in groups of BLOCKS_AT_ONCE, each group added in order to the sums so far: the
+    // same additions in the same order as all blocks at once, without holding every
+    // block's profile)
     let render_one = |rot: &Rot, in_parallel: bool| {
         let prep = prepare(rot, in_parallel);
-        let accs: Vec<Accumulator> = if in_parallel {
-            blocks
-                .par_iter()
-                .map(|r| shade_rows(rot, &prep, r))
-                .collect()
-        } else {
-            blocks.iter().map(|r| shade_rows(rot, &prep, r)).collect()
-        };
-        Accumulator::concat(accs)
+        let mut sums: Option<Accumulator> = None;
+        for group in blocks.chunks(BLOCKS_AT_ONCE) {
+            let accs: Vec<Accumulator> = if in_parallel {
+                group
+                    .par_iter()
+                    .map(|r| shade_rows(rot, &prep, r))
+                    .collect()
+            } else {
+                group.iter().map(|r| shade_rows(rot, &prep, r)).collect()
+            };
+            sums = Some(Accumulator::concat(sums.into_iter().chain(accs)));
+        }
+        sums.expect("at least one row block").into_outputs()
     };
     // attitudes in parallel when there are enough of them and that many fit the memory
     // budget; otherwise at most as many at a time as fit, each one's visibility samples
@@ -1263,8 +1349,14 @@ mod tests {
         };
         // 128 x 128, 8 samples, Mueller: ids 32, depth 8, image 64, range + coverage 8
         // bytes per pixel, and the profile
+        // bytes per pixel, the profile and the total, and 16 row blocks' profiles and
+        // weights
         let b = attitude_bytes(128, 8, 16, 100, all);
-        assert_eq!(b, 128 * 128 * (4 * 8 + 8 + 16 * 4 + 8) + 100 * 16 * 8);
+        let blocks = 16 * (100 * 16 * 8 + 100 * 8);
+        assert_eq!(
+            b,
+            128 * 128 * (4 * 8 + 8 + 16 * 4 + 8) + 100 * 16 * 8 + 16 * 8 + blocks
+        );
         assert_eq!(attitudes_at_once(b, 16), 16); // small: one per thread
         let profile_only = Outputs {
             image: false,
@@ -1273,7 +1365,13 @@ mod tests {
         };
         assert_eq!(
             attitude_bytes(128, 8, 16, 100, profile_only),
-            128 * 128 * 40 + 100 * 16 * 8
+            128 * 128 * 40 + 100 * 16 * 8 + 16 * 8 + blocks
+        );
+        // many bins at the largest side: the blocks held at once are BLOCKS_AT_ONCE, not
+        // all 1024 of them
+        assert_eq!(
+            attitude_bytes(8192, 1, 1, 65536, profile_only),
+            8192 * 8192 * 12 + 65536 * 8 + 8 + BLOCKS_AT_ONCE * 65536 * 16
         );
         // the largest image side at 16 samples (8192^2 x 144 bytes, 9.7 GB): one at a time
         let big = attitude_bytes(8192, 16, 16, 1000, all);
