@@ -271,8 +271,9 @@ def test_a_measurement_object_is_registered_on_the_database_grid(tiny_db_for_mea
     database's grid and, noise-free and background-free, scores its own candidate 1."""
     ds, scene, sensor, q, index = tiny_db_for_measurement
     truth = pp.render(scene, sensor, q, outputs=("profile",))
-    inst = pp.Instrument(pulse_energy=1.0, target_range=1e5, channels="co_cross_linear",
-                               background_rate=1e6)
+    # the counts of a 1 J pulse spread over 1e6 pulses (photon counting: no PileUpWarning)
+    inst = pp.Instrument(pulse_energy=1e-6, target_range=1e5, channels="co_cross_linear",
+                         background_rate=1.0, n_pulses=10**6)
     meas = pp.measure(truth, inst, seed=3)
     clf = pp.Classifier(ds, projection=co_cross_projection())
     # exact expectation (signal only): the candidate scores 1 to rounding

@@ -269,7 +269,7 @@ def plate_result():
 
 
 def test_measure_is_poisson_and_reproducible(plate_result):
-    inst = instrument(jitter=20e-12, background_rate=1e6).scaled_to(500.0, plate_result)
+    inst = instrument(jitter=20e-12, background_rate=10.0, n_pulses=10**5).scaled_to(500.0, plate_result)
     m = ins.measure(plate_result, inst, seed=7)
     assert m.counts.dtype == np.int64 and m.counts.shape == m.expected.shape == (1, len(plate_result.bin_edges) - 1, 2)
     assert m.channel_names == ("co", "cross")

@@ -75,7 +75,7 @@ def test_profile_from_renders_arrays_and_measurements(renders):
     assert len(plot.profile(st.profile, bin_edges=st.bin_edges, log=True).axes) == 1
     inst = ins.Instrument(pulse_energy=1e-3, target_range=1e5, channels="stokes")
     assert len(plot.profile(mu, instrument=inst).axes[0].patches) == 6
-    meas = ins.measure(mu, ins.Instrument(pulse_energy=1e-3, target_range=1e5).scaled_to(300, mu), seed=0)
+    meas = ins.measure(mu, ins.Instrument(pulse_energy=1e-3, target_range=1e5, n_pulses=10**5).scaled_to(300, mu), seed=0)
     fig = plot.profile(meas)
     assert len(fig.axes) == 1 and len(fig.axes[0].patches) == 4  # counts and expected, 2 channels
     fig, ax = plt.subplots(1, 2)

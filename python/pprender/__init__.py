@@ -22,11 +22,11 @@ import numpy as np
 
 from . import _core
 from ._core import BrdfTable, Error, Material, __version__, brdf_table
-from .lidar import SPEED_OF_LIGHT, Lidar, RenderResult, Scene, device_info, render
+from .lidar import SPEED_OF_LIGHT, Lidar, OffCentreWarning, RenderResult, Scene, device_info, render
 from . import classify, database, distributed, so3  # noqa: E402  (their heavy imports are lazy)
 from . import instrument  # noqa: E402
-from .classify import Classifier
-from .instrument import Instrument, Measurement, expected_counts, measure
+from .classify import Classifier, NoMatchWarning
+from .instrument import Instrument, Measurement, PileUpWarning, expected_counts, measure
 from .database import build_database, open_database
 from .distributed import build_database_distributed
 
@@ -49,6 +49,9 @@ __all__ = [
     "Lidar",
     "Material",
     "MonostaticTable",
+    "NoMatchWarning",
+    "PileUpWarning",
+    "OffCentreWarning",
     "RenderResult",
     "SPEED_OF_LIGHT",
     "Scene",
@@ -182,8 +185,9 @@ def monostatic_table(
 
 def __getattr__(name: str) -> object:
     # pprender.models imports trimesh (about 0.5 s), fit scipy's spatial module, plot
-    # matplotlib: load them on first use.
-    if name in ("models", "fit", "plot"):
+    # matplotlib: load them on first use (materials and mesh too, so that
+    # ``pprender.materials.get`` works without importing the submodule first).
+    if name in ("models", "fit", "plot", "materials", "mesh"):
         import importlib
 
         return importlib.import_module("." + name, __name__)

@@ -15,6 +15,17 @@ Conventions (every function and class in this module):
   ``s = <W x, W y> / (|W x| |W y|)`` in ``[-1, 1]``, 1 exactly when ``W x`` is a positive
   multiple of ``W y``: insensitive to the overall intensity (range, aperture, gain).
   A candidate with ``W y = 0`` scores 0.
+* Nothing is scored against nothing (:class:`pprender.Error` instead): a measurement
+  must have at least one positive value (counts cannot be negative: one that is all
+  zero, or zero and negative everywhere, e.g. a background-subtracted measurement with
+  no signal, has nothing to classify) and must not vanish under the weights
+  (``W x_o = 0`` at every range offset); and the candidates must not all vanish
+  (``W y = 0`` for every candidate). Channels are therefore intensities or include one
+  (``I`` of the Stokes channels, ``M00`` of the Mueller ones).
+* No match is not a match: :meth:`Classifier.top_k` warns (:class:`NoMatchWarning`)
+  for measurements whose best score is at most ``1e-9`` (zero up to rounding, or
+  negative: not even positively correlated with any candidate), and
+  :attr:`Matches.matched` is False for them; their "best" candidates are arbitrary.
 * Range offsets: measurements are not registered in absolute range. The score is the
   maximum over integer offsets ``|o| <= max_shift`` of the score of ``x_o[b] = x[b + o]``
   (zero beyond the ends). ``o > 0`` means the measurement lies ``o`` bins farther in range
@@ -41,21 +52,26 @@ Conventions (every function and class in this module):
 
   Learned weights need ``F <= 4096`` (an ``F x F`` eigen-decomposition); use a
   projection with fewer channels otherwise.
+* Numbers are numbers: text, None or complex values in candidates, measurements,
+  weights or numeric parameters raise :class:`pprender.Error` naming the parameter.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from ._core import Error
+from .instrument import _numeric_array
 
 __all__ = [
     "Classifier",
     "Matches",
+    "NoMatchWarning",
     "Projection",
     "co_cross_projection",
     "mueller_projection",
@@ -64,6 +80,13 @@ __all__ = [
 
 _TARGETS = ("shape", "material", "attitude")
 _MAX_LEARNED_FEATURES = 4096
+#: Best scores at or below this are no match (module docstring).
+_NO_MATCH_SCORE = 1e-9
+
+
+class NoMatchWarning(UserWarning):
+    """:meth:`Classifier.top_k`: some measurement matches no candidate (best score
+    ``<= 1e-9``); see :attr:`Matches.matched`."""
 
 
 # --------------------------------------------------------------------------- projections
@@ -90,7 +113,7 @@ def stokes_projection(stokes_in: Sequence[float]) -> Projection:
     transmit basis (:mod:`pprender.lidar`): ``S[..., b, :] = M[..., b, :, :] @ stokes_in``,
     channels ``I Q U V`` in the receiver basis; what :func:`pprender.render` returns with
     ``Lidar(polarization=stokes_in)``."""
-    s = np.asarray(stokes_in, dtype=np.float64)
+    s = _numeric_array(stokes_in, "stokes_in", "a Stokes vector (4,)")
     if s.shape != (4,) or not np.all(np.isfinite(s)):
         raise Error(f"invalid stokes_in = {stokes_in!r}: a finite Stokes vector (4,)")
     return Projection(lambda m: m @ s, ("I", "Q", "U", "V"), f"stokes({s.tolist()})")
@@ -130,7 +153,9 @@ class Matches:
     ``index`` (into the classifier's candidates), ``score``, ``offset`` (range offset of
     the measurement in bins, module docstring), and the candidates' labels ``shape``,
     ``material`` (names), ``attitude_index`` and ``attitude`` (M, k, 4) quaternions, each
-    None when the classifier has no such labels."""
+    None when the classifier has no such labels. :attr:`matched` (M,) tells which
+    measurements match anything at all (best score above ``1e-9``); the others' rows
+    are no match (module docstring)."""
 
     index: np.ndarray
     score: np.ndarray
@@ -140,15 +165,17 @@ class Matches:
     attitude_index: np.ndarray | None
     attitude: np.ndarray | None
 
+    @property
+    def matched(self) -> np.ndarray:
+        """(M,) bool: whether the best candidate scores above ``1e-9`` (a match at all)."""
+        return np.asarray(self.score)[:, 0] > _NO_MATCH_SCORE
+
 
 # --------------------------------------------------------------------------- classifier
 
 
 def _finite_array(x: Any, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise Error(f"invalid {name}: cannot convert to a float64 array ({e})") from None
+    a = _numeric_array(x, name)
     if not np.all(np.isfinite(a)):
         raise Error(f"invalid {name}: NaN or infinite values")
     return a
@@ -217,6 +244,8 @@ class Classifier:
             self._set_labels(labels, len(feats) if feats.ndim else 0)
         if feats.ndim != 3 or feats.shape[0] == 0 or feats.shape[1] == 0 or feats.shape[2] == 0:
             raise Error(f"invalid candidates: shape {feats.shape}, expected (K, B, C) with K, B, C >= 1 (an empty database?)")
+        if not np.any(feats != 0):
+            raise Error("invalid candidates: every candidate profile is all zero (nothing to match against)")
         self.features = feats  # (K, B, C)
         K, B, C = feats.shape
         if isinstance(max_shift, (bool, np.bool_)) or not isinstance(max_shift, (int, np.integer)) or not 0 <= max_shift < B:
@@ -226,10 +255,19 @@ class Classifier:
             raise Error(f"invalid regularization = {regularization!r}: a positive number")
         if target not in _TARGETS:
             raise Error(f"invalid target = {target!r}: one of {_TARGETS}")
+        if n_components is not None and not (isinstance(weights, str) and weights == "lda"):
+            raise Error(
+                f"invalid n_components = {n_components!r}: it applies only to weights=\"lda\" (weights = {weights!r})"
+            )
         self.target = target
         self.weights = self._weights(weights, target, float(regularization), n_components)
         y = self._apply(feats.reshape(K, B * C))
         norm = np.linalg.norm(y, axis=1, keepdims=True)
+        if not np.any(norm > 0):
+            raise Error(
+                "invalid candidates/weights: W y = 0 for every candidate (the weights give zero weight to "
+                "everything the candidates contain), so every score would be 0"
+            )
         self._y = np.divide(y, norm, out=np.zeros_like(y), where=norm > 0)  # (K, F'), unit rows
 
     # ------------------------------------------------------------------ construction
@@ -393,6 +431,13 @@ class Classifier:
         zero = ~np.any(x != 0, axis=(1, 2))
         if zero.any():
             raise Error(f"invalid measurements: measurement(s) {np.flatnonzero(zero)[:10].tolist()} are all zero")
+        nonpositive = ~np.any(x > 0, axis=(1, 2))
+        if nonpositive.any():
+            raise Error(
+                f"invalid measurements: measurement(s) {np.flatnonzero(nonpositive)[:10].tolist()} have no "
+                "positive value (zero or negative everywhere): photon counts cannot be negative, so there is "
+                "no signal to classify (a background-subtracted measurement with no signal above the background?)"
+            )
         return x, single
 
     def _offsets(self) -> list[int]:
@@ -401,11 +446,13 @@ class Classifier:
             out += [o, -o]
         return out
 
-    def _scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Best scores and offsets (M, K), and whether ``W x_o != 0`` at some offset (M,)."""
         M, B, C = x.shape
         K = self.n_candidates
         best = np.full((M, K), -np.inf)
         offset = np.zeros((M, K), dtype=np.int64)
+        seen = np.zeros(M, dtype=bool)
         for o in self._offsets():
             xo = np.zeros_like(x)
             if o >= 0:
@@ -414,12 +461,13 @@ class Classifier:
                 xo[:, -o:] = x[:, : B + o]
             z = self._apply(xo.reshape(M, B * C))
             nz = np.linalg.norm(z, axis=1, keepdims=True)
+            seen |= nz[:, 0] > 0
             z = np.divide(z, nz, out=np.zeros_like(z), where=nz > 0)
             s = z @ self._y.T
             better = s > best
             best[better] = s[better]
             offset[better] = o
-        return best, offset
+        return best, offset, seen
 
     def scores(self, measurements: Any, *, return_offsets: bool = False) -> Any:
         """Scores of every measurement against every candidate.
@@ -438,13 +486,26 @@ class Classifier:
         numpy.ndarray
             (M, K) scores in [-1, 1] ((K,) for one measurement); with ``return_offsets``
             a pair (scores, offsets).
+
+        Raises
+        ------
+        pprender.Error
+            For a measurement with no positive value or one that vanishes under the
+            weights (module docstring).
         """
         x, single = self._measurements(measurements)
         out_s = np.empty((len(x), self.n_candidates))
         out_o = np.empty((len(x), self.n_candidates), dtype=np.int64)
+        seen = np.empty(len(x), dtype=bool)
         step = max(1, int(4e6 // max(self.n_candidates, 1)))  # bound the (M, K) temporaries
         for i in range(0, len(x), step):
-            out_s[i : i + step], out_o[i : i + step] = self._scores(x[i : i + step])
+            out_s[i : i + step], out_o[i : i + step], seen[i : i + step] = self._scores(x[i : i + step])
+        if not seen.all():
+            raise Error(
+                f"invalid measurements: measurement(s) {np.flatnonzero(~seen)[:10].tolist()} vanish under the "
+                "weights (W x = 0 at every range offset): their signal lies only in features the weights "
+                "ignore, so every score would be 0"
+            )
         if single:
             out_s, out_o = out_s[0], out_o[0]
         return (out_s, out_o) if return_offsets else out_s
@@ -452,7 +513,12 @@ class Classifier:
     def top_k(self, measurements: Any, k: int = 5) -> Matches:
         """The ``k`` best candidates per measurement, best first (ties: lower index
         first), with their scores, range offsets and labels (:class:`Matches`; arrays
-        (M, k), also for a single (B, C) measurement)."""
+        (M, k), also for a single (B, C) measurement).
+
+        A measurement whose best score is at most ``1e-9`` matches nothing: a
+        :class:`NoMatchWarning` names it and ``Matches.matched`` is False for it (its
+        rows are still filled, by score then index, but are not matches). Raises as
+        :meth:`scores` does."""
         x, _ = self._measurements(measurements)
         K = self.n_candidates
         if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= K:
@@ -467,6 +533,16 @@ class Classifier:
             order = np.lexsort((cand, -s[m, cand]))
             idx[m] = cand[order[:k]]
         rows = np.arange(len(x))[:, None]
+        none = np.flatnonzero(s[rows[:, 0], idx[:, 0]] <= _NO_MATCH_SCORE)
+        if len(none):
+            warnings.warn(
+                f"top_k: measurement(s) {none[:10].tolist()}{' ...' if len(none) > 10 else ''} match no "
+                f"candidate: best score {float(s[none[0], idx[none[0], 0]]):.3g} <= {_NO_MATCH_SCORE:g} "
+                "(not even positively correlated with any candidate; signal outside the candidates' "
+                "range window or channels?). Their rows are not matches: see Matches.matched",
+                NoMatchWarning,
+                stacklevel=2,
+            )
         lab = self.labels
         return Matches(
             index=idx,

@@ -254,8 +254,11 @@ def _names(kind: str, mapping: Any) -> list[str]:
 def _attitudes(attitudes: Any) -> np.ndarray:
     """(M, 4) float64 quaternions, checked (unit within 1e-6) but stored as given: the
     renderer normalizes them itself."""
-    from .so3 import _quaternions
+    from .so3 import _quaternions, scipy_quaternions
 
+    r = scipy_quaternions(attitudes)
+    if r is not None:
+        attitudes = r.reshape(-1, 4)
     q = _quaternions(attitudes, "attitudes")
     if q.ndim != 2 or len(q) == 0:
         raise Error(f"invalid attitudes: shape {q.shape}, expected (M, 4) with M >= 1")
@@ -807,8 +810,9 @@ def build_database(
         built at the sensor's wavelength) for the whole mesh, or a mapping part name ->
         material for meshes with parts (every shape must then have those parts).
     attitudes : array_like
-        (M, 4) unit quaternions ``(w, x, y, z)`` (norm within 1e-6; stored as given), e.g.
-        :func:`pprender.so3.grid`.
+        (M, 4) unit quaternions ``(w, x, y, z)`` (scalar first; norm within 1e-6; stored as
+        given), e.g. :func:`pprender.so3.grid`, or a stacked
+        ``scipy.spatial.transform.Rotation`` (stored as its ``(w, x, y, z)``).
     sensor : pprender.Lidar
         The sensor; ``polarization=None`` stores Mueller profiles, a Stokes vector stores
         Stokes profiles.

@@ -26,6 +26,16 @@ Conventions (written once here):
   give ``-inf``: :meth:`ForwardModel.log_prob` never raises for a parameter value.
 * Likelihood: independent Poisson counts in every range bin and channel,
   ``log L = sum_bc [k log(lam) - lam - log(k!)]`` (:func:`poisson_log_likelihood`).
+* Attitudes (``reference_attitude``, :func:`attitude_error`): rotation matrices
+  ``(..., 3, 3)`` (body to telescope), quaternions ``(..., 4)`` in pprender's scalar-first
+  order ``(w, x, y, z)``, or :class:`scipy.spatial.transform.Rotation` objects (converted
+  with ``as_matrix()``). Scipy's own quaternion arrays are ``(x, y, z, w)``: pass the
+  ``Rotation`` itself (or ``r.as_quat(scalar_first=True)``), never ``r.as_quat()``.
+* Failed fits are not results: :func:`fit_nlopt` raises :class:`pprender.Error` when the
+  log-likelihood is ``-inf`` at every point it tried (it would otherwise hand back ``x0``
+  as if converged), and :func:`sample_emcee` refuses starts where it is ``-inf``.
+* Numbers are numbers: text (``"1e-3"``), None or complex values for numeric parameters
+  raise :class:`pprender.Error` naming the parameter.
 * Rendering batches: walkers whose material and scale agree are rendered in one
   :func:`pprender.render` call (when only the attitude is free, all of them together);
   materials and scenes are cached on their parameter values (least recently used first
@@ -46,7 +56,7 @@ from scipy.spatial.transform import Rotation
 
 from . import lidar as _lidar
 from ._core import Error, Material
-from .instrument import Instrument, Measurement, _check_edges, expected_counts
+from .instrument import Instrument, Measurement, _check_edges, _check_number, _numeric_array, expected_counts
 
 __all__ = [
     "DEFAULT_BOUNDS",
@@ -109,10 +119,7 @@ def poisson_log_likelihood(counts: Any, expected: Any) -> Any:
     gives ``-inf`` (impossible data), never NaN.
     """
     k = _counts_array(counts)
-    try:
-        lam = np.asarray(expected, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise Error("invalid expected: not an array of numbers") from None
+    lam = _numeric_array(expected, "expected", "an array of expected counts")
     if not np.all(np.isfinite(lam)) or np.any(lam < 0):
         raise Error("invalid expected: must be finite and >= 0 (counts)")
     if k.ndim < 2 or lam.ndim < 2:
@@ -128,20 +135,34 @@ def poisson_log_likelihood(counts: Any, expected: Any) -> Any:
 # ---------------------------------------------------------------------- attitude
 
 
+def _attitude_matrices(r: Any, name: str) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) from matrices, (w, x, y, z) quaternions (..., 4) or a
+    :class:`scipy.spatial.transform.Rotation` (module docstring)."""
+    if isinstance(r, Rotation):
+        return np.asarray(r.as_matrix(), dtype=np.float64)
+    a = _numeric_array(r, name, "rotation matrices (..., 3, 3), (w, x, y, z) quaternions (..., 4) or a scipy Rotation")
+    if not np.all(np.isfinite(a)):
+        raise Error(f"invalid {name}: not finite")
+    if a.ndim >= 1 and a.shape[-1:] == (4,):
+        n = np.linalg.norm(a, axis=-1, keepdims=True)
+        if np.any(n == 0):
+            raise Error(f"invalid {name}: a zero quaternion")
+        q = a / n
+        return Rotation.from_quat(q.reshape(-1, 4)[:, [1, 2, 3, 0]]).as_matrix().reshape(a.shape[:-1] + (3, 3))
+    if a.ndim < 2 or a.shape[-2:] != (3, 3):
+        raise Error(f"invalid {name}: shape {a.shape}, expected (..., 3, 3) or (..., 4)")
+    eye = np.einsum("...ji,...jk->...ik", a, a)
+    if not (np.allclose(eye, np.eye(3), rtol=0, atol=1e-6) and np.all(np.linalg.det(a) > 0)):
+        raise Error(f"invalid {name}: not a rotation matrix (orthonormal with determinant +1, to 1e-6)")
+    return a
+
+
 def attitude_error(r_a: Any, r_b: Any) -> Any:
     """Rotation angle (rad, in [0, pi]) of ``R_a R_b^T``: the angle between attitudes.
-    Rotation matrices (..., 3, 3) or quaternions (..., 4) ``(w, x, y, z)``."""
-
-    def mats(r: Any) -> np.ndarray:
-        a = np.asarray(r, dtype=np.float64)
-        if a.shape[-1:] == (4,):
-            q = a / np.linalg.norm(a, axis=-1, keepdims=True)
-            return Rotation.from_quat(q.reshape(-1, 4)[:, [1, 2, 3, 0]]).as_matrix().reshape(a.shape[:-1] + (3, 3))
-        if a.shape[-2:] != (3, 3):
-            raise Error(f"invalid attitude: shape {a.shape}, expected (..., 3, 3) or (..., 4)")
-        return a
-
-    a, b = mats(r_a), mats(r_b)
+    Rotation matrices (..., 3, 3), quaternions (..., 4) ``(w, x, y, z)`` (scalar first,
+    not scipy's ``as_quat()`` order) or :class:`scipy.spatial.transform.Rotation`
+    objects (single or stacked); they broadcast."""
+    a, b = _attitude_matrices(r_a, "attitude r_a"), _attitude_matrices(r_b, "attitude r_b")
     tr = np.einsum("...ij,...ij->...", a, b)  # trace(A B^T)
     ang = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
     return float(ang) if np.ndim(ang) == 0 else ang
@@ -205,8 +226,10 @@ class ForwardModel:
         Values of parameters that are not free.
     bounds : mapping, optional
         ``name -> (low, high)`` for free parameters (default :data:`DEFAULT_BOUNDS`).
-    reference_attitude : (3, 3) or (4,), optional
-        ``R_ref`` (default identity).
+    reference_attitude : (3, 3), (4,) or scipy Rotation, optional
+        ``R_ref`` (default identity): one rotation matrix, one ``(w, x, y, z)`` quaternion
+        (scalar first) or a single :class:`scipy.spatial.transform.Rotation` (a stack of
+        one is accepted, of several refused).
     attitude_frame : {"telescope", "body"}
         Frame of the rotation vector (module docstring).
     fitted_parts : sequence of str or int, optional
@@ -259,7 +282,9 @@ class ForwardModel:
                 raise Error(f"invalid fixed parameter {name!r}: choose from {PARAMETERS}")
             if name in free:
                 raise Error(f"invalid fixed parameter {name!r}: it is also free")
-            if not (isinstance(v, (int, float, np.integer, np.floating)) and math.isfinite(float(v))):
+            if isinstance(v, (bool, np.bool_)) or not (
+                isinstance(v, (int, float, np.integer, np.floating)) and math.isfinite(float(v))
+            ):
                 raise Error(f"invalid fixed {name} = {v!r}: a finite number")
         self.fixed = {k: float(v) for k, v in fixed.items()}
         bounds = dict(bounds or {})
@@ -270,9 +295,15 @@ class ForwardModel:
         for name in free:
             b = bounds.get(name, DEFAULT_BOUNDS[name])
             try:
-                lo_, hi_ = (float(b[0]), float(b[1]))
-            except (TypeError, ValueError, IndexError):
+                lo_, hi_ = b
+            except (TypeError, ValueError):
                 raise Error(f"invalid bounds for {name!r}: {b!r}, expected (low, high)") from None
+            if not all(
+                isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+                for v in (lo_, hi_)
+            ):
+                raise Error(f"invalid bounds for {name!r}: {b!r}, expected (low, high) numbers")
+            lo_, hi_ = float(lo_), float(hi_)
             if not (math.isfinite(lo_) and math.isfinite(hi_) and lo_ < hi_):
                 raise Error(f"invalid bounds for {name!r}: {b!r}, expected finite low < high")
             lo.append(lo_)
@@ -285,7 +316,15 @@ class ForwardModel:
         if reference_attitude is None:
             self.reference_attitude = np.eye(3)
         else:
-            self.reference_attitude = _lidar._rotations(reference_attitude)[0]
+            ref = _attitude_matrices(reference_attitude, "reference_attitude")
+            if ref.shape == (1, 3, 3):
+                ref = ref[0]
+            if ref.shape != (3, 3):
+                raise Error(
+                    f"invalid reference_attitude: {ref.shape[:-2]} attitudes; expected one: a (3, 3) "
+                    "matrix, a (4,) (w, x, y, z) quaternion or a single scipy Rotation"
+                )
+            self.reference_attitude = np.ascontiguousarray(ref)
         # sensor
         if lidar is None:
             lidar = _lidar.Lidar(wavelength=instrument.wavelength)
@@ -333,9 +372,9 @@ class ForwardModel:
                 else:
                     raise Error(f"invalid fitted_parts entry {p!r}: a part name or a material index")
         self.fitted = sorted(set(idx))
-        self._cache_size = int(cache_size)
-        if self._cache_size < 1:
+        if isinstance(cache_size, (bool, np.bool_)) or not isinstance(cache_size, (int, np.integer)) or cache_size < 1:
             raise Error(f"invalid cache_size = {cache_size!r}: an integer >= 1")
+        self._cache_size = int(cache_size)
         self._materials_cache: OrderedDict[tuple, list[Material]] = OrderedDict()
         self._scenes: OrderedDict[tuple, _lidar.Scene] = OrderedDict()
         self.render_calls = 0
@@ -365,10 +404,7 @@ class ForwardModel:
         return self.instrument.channel_names
 
     def _thetas(self, thetas: Any) -> tuple[np.ndarray, bool]:
-        try:
-            th = np.asarray(thetas, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise Error("invalid theta: not an array of numbers") from None
+        th = _numeric_array(thetas, "theta", f"parameter values {self.names}")
         single = th.ndim == 1
         th = np.atleast_2d(th)
         if th.ndim != 2 or th.shape[1] != self.ndim:
@@ -564,7 +600,7 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.
     th = th[0]
     if not np.isfinite(model.log_prior(th)):
         raise Error("invalid theta: outside the bounds")
-    h = 1e-3 * (model.upper - model.lower) if step is None else np.broadcast_to(np.asarray(step, float), th.shape).copy()
+    h = 1e-3 * (model.upper - model.lower) if step is None else _per_parameter(step, "step", model)
     if not np.all(np.isfinite(h) & (h > 0)):
         raise Error(f"invalid step = {step!r}: positive, finite")
     h = np.minimum(h, 0.5 * np.minimum(th - model.lower, model.upper - th))
@@ -615,11 +651,17 @@ _NLOPT_MESSAGES = {
 }
 
 
-def _x0(model: ForwardModel, x0: Any) -> np.ndarray:
+def _per_parameter(value: Any, name: str, model: ForwardModel) -> np.ndarray:
+    """A number or one per free parameter, as a float64 (ndim,) array."""
+    v = _numeric_array(value, name, f"a number or one per free parameter {model.names}")
     try:
-        x = np.asarray(x0, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise Error("invalid x0: not an array of numbers") from None
+        return np.broadcast_to(v, (model.ndim,)).copy()
+    except ValueError:
+        raise Error(f"invalid {name}: shape {v.shape}, expected () or ({model.ndim},) for {model.names}") from None
+
+
+def _x0(model: ForwardModel, x0: Any) -> np.ndarray:
+    x = _numeric_array(x0, "x0", f"a starting point {model.names}")
     if x.shape != (model.ndim,):
         raise Error(f"invalid x0: shape {x.shape}, expected ({model.ndim},) for {model.names}")
     if not np.all(np.isfinite(x)) or np.any(x < model.lower) or np.any(x > model.upper):
@@ -670,7 +712,16 @@ def fit_nlopt(
         with ``numpy.random.default_rng(seed)``; the best optimum is returned.
 
     Log-likelihoods of ``-inf`` (invalid materials; zero expected counts where counts
-    were recorded, impossible with background) are passed to nlopt as ``-1e30``.
+    were recorded, impossible with background) are passed to nlopt as ``-1e30``. If it is
+    ``-inf`` at every point tried, over all starts, there is no fit: nlopt would stop
+    ("xtol reached") at ``x0`` on the flat ``-1e30``, and :class:`pprender.Error` is raised
+    instead. A start that never found a finite value is kept in ``starts`` with
+    ``log_likelihood = -inf``; the best start is returned.
+
+    Raises
+    ------
+    pprender.Error
+        For bad arguments, and when the log-likelihood is ``-inf`` everywhere tried.
     """
     import nlopt
 
@@ -681,15 +732,20 @@ def fit_nlopt(
         raise Error(f"invalid algorithm = {algorithm!r}: one of {_ALGORITHMS}")
     x0 = _x0(model, x0)
     model._counts(measurement)  # validate the data once
-    if not isinstance(n_starts, (int, np.integer)) or n_starts < 1:
+    if isinstance(n_starts, (bool, np.bool_)) or not isinstance(n_starts, (int, np.integer)) or n_starts < 1:
         raise Error(f"invalid n_starts = {n_starts!r}: an integer >= 1")
-    if not isinstance(maxeval, (int, np.integer)) or maxeval < 1:
+    if isinstance(maxeval, (bool, np.bool_)) or not isinstance(maxeval, (int, np.integer)) or maxeval < 1:
         raise Error(f"invalid maxeval = {maxeval!r}: an integer >= 1")
+    ftol = _check_number("ftol_abs", ftol_abs, 0.0, math.inf, False, True, "log-likelihood units")
     width = model.upper - model.lower
-    step = 0.05 * width if initial_step is None else np.broadcast_to(np.asarray(initial_step, float), width.shape)
-    xtol = 1e-8 * width if xtol_abs is None else np.broadcast_to(np.asarray(xtol_abs, float), width.shape)
+    step = 0.05 * width if initial_step is None else _per_parameter(initial_step, "initial_step", model)
+    xtol = 1e-8 * width if xtol_abs is None else _per_parameter(xtol_abs, "xtol_abs", model)
     if not np.all(np.isfinite(step) & (step > 0)):
         raise Error(f"invalid initial_step = {initial_step!r}: positive, finite")
+    if not np.all(np.isfinite(xtol) & (xtol >= 0)):
+        raise Error(f"invalid xtol_abs = {xtol_abs!r}: finite, >= 0")
+    if seed is not None and (isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise Error(f"invalid seed = {seed!r}: an integer >= 0 or None")
     rng = np.random.default_rng(seed)
     starts = [x0] + [model.lower + width * rng.random(model.ndim) for _ in range(n_starts - 1)]
     code = getattr(nlopt, {"BOBYQA": "LN_BOBYQA", "NELDERMEAD": "LN_NELDERMEAD", "COBYLA": "LN_COBYLA"}[algo])
@@ -711,7 +767,7 @@ def fit_nlopt(
         opt.set_lower_bounds(model.lower.tolist())
         opt.set_upper_bounds(model.upper.tolist())
         opt.set_max_objective(objective)
-        opt.set_ftol_abs(float(ftol_abs))
+        opt.set_ftol_abs(ftol)
         opt.set_xtol_abs(np.asarray(xtol, float).tolist())
         opt.set_maxeval(int(maxeval))
         opt.set_initial_step(np.asarray(step, float).tolist())
@@ -729,6 +785,15 @@ def fit_nlopt(
         if best is None or state["best"] > best[0]:
             best = (float(state["best"]), state["x"], rc)
     assert best is not None
+    if not math.isfinite(best[0]):
+        raise Error(
+            f"fit_nlopt found no fit: the log-likelihood is -inf at every one of the {n_eval} points tried "
+            f"({len(starts)} start(s) from x0 = {x0.tolist()}), so there is nothing to maximize and x0 is "
+            "not an estimate. Usually the counts are impossible under the model: counts recorded in bins "
+            "where it expects none (zero expected counts and no background; check that bin_edges cover "
+            "the target's range window and that the instrument's background_rate is right), or no "
+            "material can be built within the bounds"
+        )
     return FitResult(
         x=best[1],
         log_likelihood=best[0],
@@ -765,6 +830,10 @@ def sample_emcee(
     ``vectorize=True``: each call renders a whole set of walkers (:class:`ForwardModel`).
     Returns the :class:`emcee.EnsembleSampler` after ``n_steps`` steps (chains via
     ``get_chain(discard=..., flat=True)``).
+
+    Every initial walker must have a finite log posterior: where the log-likelihood is
+    ``-inf`` (counts where the model expects none, no material) :class:`pprender.Error`
+    is raised, saying for how many walkers; emcee would otherwise keep them stuck.
     """
     import emcee
 
@@ -777,7 +846,7 @@ def sample_emcee(
         raise Error(f"invalid n_steps = {n_steps!r}: an integer >= 1")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
         raise Error(f"invalid seed = {seed!r}: an integer in [0, 2**32)")
-    sp = np.broadcast_to(np.asarray(spread, dtype=np.float64), (model.ndim,))
+    sp = _per_parameter(spread, "spread", model)
     if not np.all(np.isfinite(sp) & (sp > 0)):
         raise Error(f"invalid spread = {spread!r}: positive, finite")
     model._counts(measurement)
@@ -786,8 +855,21 @@ def sample_emcee(
     p0 = x0 + sp * width * rng.standard_normal((int(n_walkers), model.ndim))
     p0 = np.clip(p0, model.lower + 1e-12 * width, model.upper - 1e-12 * width)
     lp0 = model.log_prob(p0, measurement)
-    if not np.all(np.isfinite(lp0)):
-        raise Error(f"invalid x0: {int(np.sum(~np.isfinite(lp0)))} initial walkers have log_prob = -inf")
+    bad = ~np.isfinite(lp0)
+    if np.all(bad):
+        raise Error(
+            f"invalid x0 = {x0.tolist()}: the log-likelihood is -inf at every one of the {int(n_walkers)} "
+            "initial walkers around it: the counts are impossible under the model there (counts recorded in "
+            "bins where it expects none, with no background: check bin_edges cover the target's range "
+            "window and the instrument's background_rate; or no material can be built at x0)"
+        )
+    if np.any(bad):
+        raise Error(
+            f"invalid x0 = {x0.tolist()}: the log-likelihood is -inf at {int(np.sum(bad))} of the "
+            f"{int(n_walkers)} initial walkers (spread {sp.tolist()} of the bound widths around x0 reaches "
+            "parameters where the counts are impossible or no material can be built); start elsewhere or "
+            "reduce spread"
+        )
     sampler = emcee.EnsembleSampler(int(n_walkers), model.ndim, model.log_prob, args=(measurement,),
                                     vectorize=True, moves=moves)
     state = emcee.State(p0, log_prob=lp0, random_state=np.random.RandomState(int(seed)).get_state())

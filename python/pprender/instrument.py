@@ -47,6 +47,28 @@ while its range gate is open, i.e. ``rate * (2 * bin width / c)`` per bin and pu
 Shot noise: counts are Poisson with mean ``signal + background`` (a photon-counting
 detector without dead time or pile-up: valid while the expected counts per bin and
 pulse are well below 1; a linear-mode detector's excess noise is not modelled).
+:func:`measure` warns (:class:`PileUpWarning`, never refuses) where the expected counts
+per bin and per pulse of a channel exceed :data:`PILE_UP_THRESHOLD` = 0.1. Why 0.1: a
+single-photon detector whose dead time spans at least a bin records at most one event
+per bin and pulse, on average ``1 - exp(-lam)`` of the ``lam`` expected, a loss of
+``1 - (1 - exp(-lam)) / lam ~ lam / 2``: 5 % at ``lam = 0.1`` (and the counts are then
+no longer Poisson). This is a lower bound on the distortion: a detector whose dead time
+spans many bins (or the whole range gate, one event per pulse) loses counts in later
+bins at lower per-bin rates, governed by the counts per pulse within a dead time. "Per
+pulse" counts the pulses a channel sees: ``n_pulses * pulse_share``. A detector model
+(dead time, pile-up, saturation) will replace this warning.
+
+Wavelength: a :class:`pprender.RenderResult` records the wavelength it was rendered at
+(its materials' wavelength); :func:`expected_counts`, :func:`measure`,
+:meth:`Instrument.signal_counts` and :meth:`Instrument.scaled_to` refuse one that
+differs from ``instrument.wavelength`` by more than 1e-6 relative (the photon number
+scales with the wavelength, the materials' response too). Raw profile arrays, and
+results assembled by hand (``wavelength=None``), carry no wavelength and cannot be
+checked: render them at the instrument's wavelength.
+
+Numbers are numbers: text (``"1e-3"``), None or a complex value where a real number or
+an array of them is expected raises :class:`pprender.Error` naming the parameter
+(scalar parameters refuse booleans too); nothing is converted from text.
 
 SNR (:func:`snr`): ``S / sqrt(S + B)`` with ``S`` and ``B`` the expected signal and
 background counts summed over all bins and channels.
@@ -55,6 +77,7 @@ background counts summed over all bins and channels.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
@@ -66,10 +89,12 @@ from .lidar import SPEED_OF_LIGHT, RenderResult
 
 __all__ = [
     "PLANCK",
+    "PILE_UP_THRESHOLD",
     "CHANNEL_PRESETS",
     "Channels",
     "Instrument",
     "Measurement",
+    "PileUpWarning",
     "channel_set",
     "expected_counts",
     "jitter_matrix",
@@ -79,6 +104,21 @@ __all__ = [
 
 #: Planck constant (J s), exact in the SI.
 PLANCK = 6.62607015e-34
+
+#: Expected counts per bin and per pulse (of one channel) above which :func:`measure`
+#: warns that the Poisson photon-counting model no longer holds (module docstring:
+#: a pile-up loss of about half of it, 5 %).
+PILE_UP_THRESHOLD = 0.1
+
+
+class PileUpWarning(UserWarning):
+    """:func:`measure` was asked for more than :data:`PILE_UP_THRESHOLD` expected counts
+    per bin and pulse: detector dead time, pile-up and saturation, which are not
+    modelled, would distort such a measurement (module docstring)."""
+
+
+# Largest mean numpy's Poisson sampler accepts (int64 counts; its limit is 9.2234e18).
+_POISSON_MAX = 9.2e18
 
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
@@ -260,6 +300,23 @@ def _check_number(name: str, value: Any, lo: float, hi: float, lo_open: bool, hi
     return v
 
 
+def _numeric_array(value: Any, name: str, what: str = "an array of numbers") -> np.ndarray:
+    """``value`` as a float64 array; :class:`Error` naming ``name`` for text, None,
+    complex values or anything else that is not made of real numbers (booleans pass as
+    0/1, as in NumPy). NumPy would otherwise convert ``"1e-3"`` silently."""
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError):
+        raise Error(f"invalid {name}: {what}, got {type(value).__name__}") from None
+    ok = raw.dtype.kind in "biuf"
+    if raw.dtype.kind == "O":
+        ok = all(isinstance(v, (int, float, np.integer, np.floating, np.bool_)) for v in raw.flat)
+    if not ok:
+        shown = repr(value) if raw.size <= 8 else f"an array of dtype {raw.dtype}"
+        raise Error(f"invalid {name} = {shown}: {what} (not text, None or complex)")
+    return raw.astype(np.float64)
+
+
 @dataclass(frozen=True)
 class Instrument:
     """A PPR instrument: laser, beam, receiver, detector and polarization channels.
@@ -271,7 +328,8 @@ class Instrument:
     target_range : float
         Range to the target (m), in (0, 1e9].
     wavelength : float
-        Laser wavelength (m), in (0, 1e-5]; must match the renderer's materials.
+        Laser wavelength (m), in (0, 1e-5]; must match the renderer's materials (checked
+        against a RenderResult's ``wavelength``, module docstring).
     divergence : float
         Transmit beam divergence, full angle (rad) in (0, pi): at the 1/e^2 irradiance
         points for ``beam="gaussian"``, the edge of the disc for ``"tophat"``.
@@ -329,10 +387,7 @@ class Instrument:
         elif not isinstance(ch, Channels):
             raise Error(f"invalid channels = {ch!r}: one of {CHANNEL_PRESETS} or a Channels")
         object.__setattr__(self, "channels", ch)
-        try:
-            bg = np.asarray(self.background_rate, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise Error(f"invalid background_rate = {self.background_rate!r}: counts/s, >= 0") from None
+        bg = _numeric_array(self.background_rate, "background_rate", "counts/s >= 0, one value or one per channel")
         if bg.ndim == 0:
             bg = np.full(len(ch), float(bg))
         if bg.shape != (len(ch),) or not np.all(np.isfinite(bg)) or np.any(bg < 0):
@@ -446,9 +501,7 @@ def jitter_matrix(src_edges: Any, dst_edges: Any, sigma: float) -> np.ndarray:
     """
     a = _check_edges(src_edges, "src_edges")
     d = _check_edges(dst_edges, "dst_edges")
-    s = float(sigma)
-    if not (math.isfinite(s) and s >= 0):
-        raise Error(f"invalid sigma = {sigma!r}: a finite length >= 0 (m)")
+    s = _check_number("sigma", sigma, 0.0, math.inf, False, True, "m")
     lo, hi = a[None, :-1], a[None, 1:]
     c0, c1 = d[:-1, None], d[1:, None]
     k = np.clip(np.minimum(hi, c1) - np.maximum(lo, c0), 0.0, None)
@@ -462,10 +515,7 @@ def jitter_matrix(src_edges: Any, dst_edges: Any, sigma: float) -> np.ndarray:
 
 
 def _check_edges(edges: Any, name: str) -> np.ndarray:
-    try:
-        e = np.asarray(edges, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise Error(f"invalid {name}: not an array of numbers") from None
+    e = _numeric_array(edges, name, "an array of bin edges (m)")
     if e.ndim != 1 or len(e) < 2:
         raise Error(f"invalid {name}: shape {e.shape}, expected (B + 1,) with B >= 1")
     if not np.all(np.isfinite(e)):
@@ -475,9 +525,28 @@ def _check_edges(edges: Any, name: str) -> np.ndarray:
     return e
 
 
-def _profile_and_edges(profile: Any, bin_edges: Any) -> tuple[np.ndarray, np.ndarray, bool]:
-    """(profile array, edges, is_mueller)."""
+def _check_wavelength(result: RenderResult, instrument: Instrument) -> None:
+    """Refuse a render made at another wavelength than the instrument's (module
+    docstring); results without a wavelength (assembled by hand) pass unchecked."""
+    lam = getattr(result, "wavelength", None)
+    if lam is None:
+        return
+    if not abs(float(lam) - instrument.wavelength) <= 1e-6 * instrument.wavelength:
+        raise Error(
+            f"invalid profile: the RenderResult was rendered at wavelength {float(lam)!r} m but the "
+            f"instrument's wavelength is {instrument.wavelength!r} m (they must agree to 1e-6 relative); "
+            "render with Lidar(wavelength=instrument.wavelength) or use an Instrument at the render's wavelength"
+        )
+
+
+def _profile_and_edges(
+    profile: Any, bin_edges: Any, instrument: Instrument | None = None
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(profile array, edges, is_mueller); with ``instrument``, a RenderResult's
+    wavelength is checked against it."""
     if isinstance(profile, RenderResult):
+        if instrument is not None:
+            _check_wavelength(profile, instrument)
         if profile.profile is None:
             raise Error('invalid profile: the RenderResult has no profile (render with outputs=("profile",))')
         if bin_edges is not None and not np.array_equal(np.asarray(bin_edges, dtype=np.float64), profile.bin_edges):
@@ -488,10 +557,7 @@ def _profile_and_edges(profile: Any, bin_edges: Any) -> tuple[np.ndarray, np.nda
         raise Error("invalid bin_edges: required with a profile array (the RenderResult's bin_edges)")
     e = _check_edges(bin_edges, "bin_edges")
     b = len(e) - 1
-    try:
-        p = np.asarray(profile, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise Error("invalid profile: not an array of numbers") from None
+    p = _numeric_array(profile, "profile", "an array of cross-sections (m^2)")
     if p.ndim >= 3 and p.shape[-3:] == (b, 4, 4):
         mueller = True
     elif p.ndim >= 2 and p.shape[-2:] == (b, 4):
@@ -548,7 +614,8 @@ def expected_counts(
         ``(..., B, 4, 4)`` Mueller profile (the instrument's generator states are applied)
         or ``(..., B, 4)`` Stokes profile rendered with ``Lidar(polarization=
         instrument.channels.transmit)`` (unit intensity), m^2 per bin. A RenderResult
-        supplies its own ``bin_edges``.
+        supplies its own ``bin_edges``, and its ``wavelength`` must be the instrument's
+        (1e-6 relative); an array's wavelength cannot be checked (module docstring).
     instrument : Instrument
     bin_edges : array (B + 1,), optional
         Range bin edges of ``profile`` (m); required for an array.
@@ -560,7 +627,7 @@ def expected_counts(
     """
     if not isinstance(instrument, Instrument):
         raise Error(f"invalid instrument of type {type(instrument).__name__}: expected pprender.instrument.Instrument")
-    p, e, mueller = _profile_and_edges(profile, bin_edges)
+    p, e, mueller = _profile_and_edges(profile, bin_edges, instrument)
     out = e if out_edges is None else _check_edges(out_edges, "out_edges")
     sig = _channel_cross_sections(p, mueller, instrument.channels)  # type: ignore[arg-type]
     sig = sig * instrument.counts_per_cross_section
@@ -575,8 +642,8 @@ def expected_counts(
 def snr(signal: Any, background: Any) -> float:
     """``S / sqrt(S + B)`` with ``S = sum(signal)``, ``B = sum(background)`` (counts);
     0 when both are 0."""
-    s = float(np.sum(signal))
-    b = float(np.sum(background))
+    s = float(np.sum(_numeric_array(signal, "signal", "counts")))
+    b = float(np.sum(_numeric_array(background, "background", "counts")))
     if s < 0 or b < 0 or not (math.isfinite(s) and math.isfinite(b)):
         raise Error("invalid signal/background: finite counts >= 0")
     return 0.0 if s + b == 0 else s / math.sqrt(s + b)
@@ -634,6 +701,29 @@ class Measurement:
         )
 
 
+def _warn_pile_up(lam: np.ndarray, instrument: Instrument) -> None:
+    """:class:`PileUpWarning` where ``lam`` (..., B, C) exceeds :data:`PILE_UP_THRESHOLD`
+    counts per bin and per pulse of its channel (``n_pulses * pulse_share`` pulses)."""
+    pulses = instrument.n_pulses * np.asarray(instrument.channels.pulse_share)  # type: ignore[union-attr]
+    per_pulse = lam / pulses
+    worst = float(np.max(per_pulse, initial=0.0))
+    if not worst > PILE_UP_THRESHOLD:
+        return
+    b, c = np.unravel_index(int(np.argmax(per_pulse)), per_pulse.shape)[-2:]
+    loss = 1.0 - (1.0 - math.exp(-worst)) / worst if worst < 700 else 1.0
+    n_over = int(np.sum(per_pulse > PILE_UP_THRESHOLD))
+    warnings.warn(
+        f"measure: up to {worst:.3g} expected counts per bin per pulse (channel "
+        f"{instrument.channel_names[int(c)]!r}, bin {int(b)}; {n_over} bin/channel value(s) above "
+        f"{PILE_UP_THRESHOLD:g}): beyond the photon-counting regime. Detector dead time, pile-up and "
+        f"saturation are not modelled: a detector recording one event per bin and pulse would lose "
+        f"{100 * loss:.3g} % of these counts and they would not be Poisson. Lower the pulse energy or "
+        "aperture, or spread the counts over more pulses (n_pulses).",
+        PileUpWarning,
+        stacklevel=3,
+    )
+
+
 def measure(
     profile: Any,
     instrument: Instrument,
@@ -645,9 +735,14 @@ def measure(
     """Simulate a measurement: expected counts (:func:`expected_counts`) and Poisson
     shot noise drawn with ``numpy.random.default_rng(seed)`` (or ``rng``; not both).
 
-    ``profile``: a :class:`pprender.RenderResult` (with a profile) or an array
-    ``(..., B, 4, 4)`` / ``(..., B, 4)`` with ``bin_edges`` (module docstring).
-    Returns a :class:`Measurement` on the profile's bins.
+    ``profile``: a :class:`pprender.RenderResult` (with a profile, rendered at the
+    instrument's wavelength) or an array ``(..., B, 4, 4)`` / ``(..., B, 4)`` with
+    ``bin_edges`` (module docstring). Returns a :class:`Measurement` on the profile's bins.
+
+    Warns :class:`PileUpWarning` where a channel expects more than
+    :data:`PILE_UP_THRESHOLD` counts per bin and per pulse (signal plus background): the
+    Poisson model ignores the dead time and pile-up that distort such counts (module
+    docstring). The measurement is still returned.
     """
     if seed is not None and rng is not None:
         raise Error("invalid seed/rng: give one of them, not both")
@@ -657,12 +752,21 @@ def measure(
         rng = np.random.default_rng(seed)
     elif not isinstance(rng, np.random.Generator):
         raise Error(f"invalid rng of type {type(rng).__name__}: expected numpy.random.Generator")
-    p, e, _ = _profile_and_edges(profile, bin_edges)
+    if not isinstance(instrument, Instrument):
+        raise Error(f"invalid instrument of type {type(instrument).__name__}: expected pprender.instrument.Instrument")
+    p, e, _ = _profile_and_edges(profile, bin_edges, instrument)
     if isinstance(profile, RenderResult):
         profile = p
     sig = expected_counts(profile, instrument, bin_edges=e, background=False)
     bg = instrument.background_counts(e)
     lam = sig + bg
+    top = float(np.max(lam, initial=0.0))
+    if not top <= _POISSON_MAX:
+        raise Error(
+            f"invalid profile/instrument: up to {top:.3g} expected counts in a bin, more than the largest "
+            f"Poisson mean that can be drawn ({_POISSON_MAX:.3g}, int64 counts); lower the pulse energy"
+        )
+    _warn_pile_up(lam, instrument)
     counts = rng.poisson(lam).astype(np.int64)
     return Measurement(
         counts=counts,

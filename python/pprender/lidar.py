@@ -7,7 +7,9 @@ Conventions (written once in ``src/render/mod.rs``; summary):
   ``Y`` up in the images. Receiver direction ``wo = Z``; transmitter direction
   ``wi = (sin beta, 0, cos beta)`` for the bistatic angle ``beta``.
 * Attitudes rotate the body into the telescope frame, ``p_tel = R p_body``: (N, 3, 3)
-  rotation matrices or (N, 4) unit quaternions ``(w, x, y, z)`` (scalar first). The body
+  rotation matrices, (N, 4) unit quaternions ``(w, x, y, z)`` (scalar first; scipy's
+  ``as_quat()`` is scalar-last ``(x, y, z, w)``), or a ``scipy.spatial.transform.Rotation``
+  (single or stacked), which is converted without ambiguity. The body
   origin is the range reference.
 * Images: (N, H, W, ...) with row 0 at the top (``+Y``) and column 0 at the left
   (``-X``); they span ``[-extent, extent]`` in X and Y, ``extent`` the radius of the
@@ -39,7 +41,7 @@ os.environ.setdefault("NODEVICE_SELECT", "1")
 SPEED_OF_LIGHT = 299_792_458.0
 _FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))
 
-__all__ = ["Lidar", "RenderResult", "Scene", "device_info", "render", "SPEED_OF_LIGHT"]
+__all__ = ["Lidar", "OffCentreWarning", "RenderResult", "Scene", "device_info", "render", "SPEED_OF_LIGHT"]
 
 
 def device_info(device: str = "auto") -> dict[str, Any]:
@@ -49,6 +51,15 @@ def device_info(device: str = "auto") -> dict[str, Any]:
     ``"cpu"`` (lavapipe even when a GPU is present) or ``"gpu"`` (error without one).
     """
     return dict(_core.device_info(device))
+
+
+def _is_real(x: Any) -> bool:
+    """An int or float (NumPy's included), not a bool or a string."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
 
 
 def _resolve_material(m: Any, wavelength: float) -> Material:
@@ -64,15 +75,32 @@ def _resolve_material(m: Any, wavelength: float) -> Material:
 class Scene:
     """A mesh with its materials, ready to render.
 
-    ``mesh``: a ``trimesh.Trimesh`` (or ``trimesh.Scene``, flattened with its transforms),
-    or a ``(vertices, faces)`` pair of arrays (metres, body frame). ``materials``: one
-    material for the whole mesh, a list indexed by ``face_material``, or a mapping from
-    part name to material for meshes from :mod:`pprender.models` (their
-    ``metadata["pprender_parts"]``). Materials may be :class:`pprender.Material` objects
-    or names from :mod:`pprender.materials` (built at ``wavelength``, m). ``face_material``: (F,) indices into the
-    material list (default: the model's part indices, or 0). ``smooth=True`` interpolates
-    vertex normals (from the mesh, or ``normals``) for shading; the default shades flat
-    faces, which is right for boxes and panels.
+    ``mesh``: a ``trimesh.Trimesh``, a ``trimesh.Scene`` (e.g. ``trimesh.load("sat.glb")``;
+    each node of ``scene.graph.nodes_geometry`` is a part, its geometry moved by the node's
+    transform, instances included) or a ``(vertices, faces)`` pair of arrays. Vertices are
+    taken in metres in the body frame as given, with no axis conversion (glTF is Y-up:
+    rotate it yourself); a mesh more than 50 m across or in other units gives a
+    :class:`pprender.mesh.UnitsWarning`. :mod:`pprender.mesh` states all of this, the
+    flattened face order and how to rotate a model.
+
+    ``materials``: one material for the whole mesh; a list indexed by ``face_material``
+    (default: the mesh's per-face part index, :func:`pprender.mesh.flatten`'s
+    ``face_part``, so one material per part in ``parts`` order); or a mapping from name to
+    material: a model's part names (:mod:`pprender.models`, ``metadata["pprender_parts"]``)
+    or, for a ``trimesh.Scene``, node, geometry (``scene.geometry`` keys) or material
+    (``geometry.visual.material.name``) names, each node taking the most specific key
+    that names it (node > geometry > material). Materials may be :class:`pprender.Material`
+    objects or names from :mod:`pprender.materials` (built at ``wavelength``, m).
+    ``face_material``: (F,) indices into the material list, in the flattened face order.
+    ``smooth=True`` interpolates vertex normals (from the mesh, or ``normals``) for
+    shading; the default shades flat faces, which is right for boxes and panels.
+
+    Attributes: ``materials`` (in material-index order) and ``parts`` (their names, None
+    without named parts); ``vertices``, ``faces`` (flattened), ``face_material`` (each
+    face's index into ``materials``), ``face_part`` (each face's index into the mesh's
+    parts, ``pprender.mesh.flatten(mesh).parts``; None without parts) and ``matched``
+    (for a mapping: part or node name -> :class:`pprender.mesh.Match`, the key that gave
+    it its material and whether it named the node, geometry or material).
     """
 
     def __init__(
@@ -85,56 +113,67 @@ class Scene:
         normals: Any = None,
         wavelength: float = 1064e-9,
     ) -> None:
-        vertices, faces, meta, vnormals = _mesh_arrays(mesh)
-        parts = meta.get("pprender_parts") if meta else None
-        if isinstance(materials, Mapping):
-            if parts is None:
-                raise Error(
-                    "invalid materials: a mapping needs a mesh with metadata['pprender_parts'] "
-                    "(pprender.models); pass a list and face_material instead"
-                )
-            missing = [p for p in parts if p not in materials]
-            if missing:
-                raise Error(
-                    f"invalid materials: no material for part(s) {missing}; "
-                    f"the mesh has parts {list(parts)}"
-                )
-            extra = [k for k in materials if k not in parts]
-            if extra:
-                raise Error(f"invalid materials: unknown part(s) {extra}; parts are {list(parts)}")
-            mat_list = [_resolve_material(materials[p], wavelength) for p in parts]
-            fm = meta.get("pprender_material")
-        elif isinstance(materials, (Material, str)):
-            mat_list = [_resolve_material(materials, wavelength)]
-            fm = None
-        else:
-            mat_list = [_resolve_material(m, wavelength) for m in materials]
-            fm = meta.get("pprender_material") if (meta and face_material is None) else None
-        if face_material is not None:
-            fm = face_material
-        if fm is None:
-            fm = np.zeros(len(faces), dtype=np.int64)
-        fm = np.asarray(fm)
-        if fm.shape != (len(faces),):
-            raise Error(f"invalid face_material: shape {fm.shape}, expected ({len(faces)},)")
-        if not np.issubdtype(fm.dtype, np.integer):
-            raise Error(f"invalid face_material: dtype {fm.dtype}, expected integers")
+        from . import mesh as _mesh
+
+        flat = _mesh.flatten(mesh, normals=bool(smooth) and normals is None)
+        a = _mesh.assign_materials(flat, materials, face_material, lambda m: _resolve_material(m, wavelength))
         vn = None
         if normals is not None:
-            vn = np.asarray(normals, dtype=np.float64)
+            try:
+                vn = np.asarray(normals, dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise Error(f"invalid normals: cannot convert to a float64 array ({e})") from None
+            if vn.shape != flat.vertices.shape:
+                raise Error(f"invalid normals: shape {vn.shape}, expected {flat.vertices.shape} (one per vertex)")
         elif smooth:
-            if vnormals is None:
+            if flat.normals is None:
                 raise Error("smooth=True needs vertex normals: pass normals= or a trimesh mesh")
-            vn = vnormals
-        self.materials: list[Material] = mat_list
-        self.parts: list[str] | None = list(parts) if parts is not None else None
+            vn = flat.normals
+        self.materials: list[Material] = a.materials
+        self.parts: list[str] | None = a.parts
+        self.matched: dict[str, _mesh.Match] | None = a.matched
+        self.vertices: np.ndarray = flat.vertices
+        self.faces: np.ndarray = flat.faces
+        self.face_material: np.ndarray = a.face_material
+        self.face_part: np.ndarray | None = flat.face_part
+        # the core builds BRDF tables per material: give it each distinct Material once
+        unique: dict[int, int] = {}
+        core_mats: list[Material] = []
+        for m in a.materials:
+            if id(m) not in unique:
+                unique[id(m)] = len(core_mats)
+                core_mats.append(m)
+        remap = np.array([unique[id(m)] for m in a.materials], dtype=np.int64)
+        fm = a.face_material
+        if len(remap) and len(fm) and 0 <= int(fm.min()) and int(fm.max()) < len(remap):
+            fm = remap[fm]
+        else:
+            core_mats = list(a.materials)  # out of range: the core names the bad index
         self._core = _core.RenderScene(
-            np.ascontiguousarray(vertices, dtype=np.float64),
-            np.ascontiguousarray(faces, dtype=np.int64),
+            np.ascontiguousarray(flat.vertices, dtype=np.float64),
+            np.ascontiguousarray(flat.faces, dtype=np.int64),
             np.ascontiguousarray(fm, dtype=np.int64),
-            mat_list,
+            core_mats,
             None if vn is None else np.ascontiguousarray(vn, dtype=np.float64),
         )
+
+    def __repr__(self) -> str:
+        def mname(m: Material) -> str:
+            return m.name or f"unnamed#{next(i for i, x in enumerate(self.materials) if x is m)}"
+
+        head = f"pprender.Scene({self.n_faces} faces, radius {self.radius:.4g} m"
+        if self.matched:
+            items = [
+                f"{p} = {mname(m.material)}"
+                + {"part": "", "node": " (by node)"}.get(m.by, f" (by {m.by} {m.key!r})")
+                for p, m in self.matched.items()
+            ]
+        elif self.parts is not None:
+            items = [f"{p} = {mname(m)}" for p, m in zip(self.parts, self.materials)]
+        else:
+            items = [mname(m) for i, m in enumerate(self.materials) if all(x is not m for x in self.materials[:i])]
+        more = f", ... ({len(items) - 8} more)" if len(items) > 8 else ""
+        return head + f", {len(items)} {'part' if self.parts is not None else 'material'}{'' if len(items) == 1 else 's'}: " + ", ".join(items[:8]) + more + ")"
 
     @property
     def radius(self) -> float:
@@ -152,27 +191,18 @@ class Scene:
 
 
 def _mesh_arrays(mesh: Any) -> tuple[np.ndarray, np.ndarray, dict[str, Any], np.ndarray | None]:
-    import trimesh
+    """(vertices, faces, metadata, vertex normals) as :class:`Scene` takes them
+    (:func:`pprender.mesh.flatten`, unvalidated). A ``trimesh.Scene``'s metadata gets
+    ``pprender_parts`` (its node names) and ``pprender_material`` (each face's node index),
+    the parts :class:`Scene` gives it, in the same flattened order."""
+    from . import mesh as _mesh
 
-    if isinstance(mesh, trimesh.Scene):
-        mesh = mesh.to_geometry()
-    if isinstance(mesh, trimesh.Trimesh):
-        v = np.asarray(mesh.vertices, dtype=np.float64)
-        f = np.asarray(mesh.faces, dtype=np.int64)
-        vn = np.asarray(mesh.vertex_normals, dtype=np.float64) if len(f) else None
-        return v, f, dict(mesh.metadata or {}), vn
-    if isinstance(mesh, (tuple, list)) and len(mesh) == 2:
-        v = np.asarray(mesh[0], dtype=np.float64)
-        f = np.asarray(mesh[1])
-        if v.ndim != 2 or v.shape[1:] != (3,):
-            raise Error(f"invalid vertices: shape {v.shape}, expected (V, 3)")
-        if f.ndim != 2 or f.shape[1:] != (3,) or not np.issubdtype(f.dtype, np.integer):
-            raise Error(f"invalid faces: shape {f.shape} dtype {f.dtype}, expected (F, 3) integers")
-        return v, f.astype(np.int64), {}, None
-    raise Error(
-        f"invalid mesh of type {type(mesh).__name__}: expected a trimesh.Trimesh, "
-        "trimesh.Scene or a (vertices, faces) pair"
-    )
+    flat = _mesh.flatten(mesh, normals=True, check=False)
+    meta = dict(flat.metadata)
+    if flat.nodes is not None:
+        meta["pprender_parts"] = list(flat.parts or [])
+        meta["pprender_material"] = flat.face_part
+    return flat.vertices, flat.faces, meta, flat.normals
 
 
 @dataclass(frozen=True)
@@ -299,17 +329,17 @@ class Lidar:
             object.__setattr__(self, "table", tuple(sorted((k, int(v)) for k, v in items)))
         for name in ("wavelength", "pulse_fwhm"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            if not (_is_real(v) and math.isfinite(v) and v > 0):
                 raise Error(f"invalid {name} = {v!r}: a positive, finite number (SI units)")
         if self.bin_width is not None and not (
-            math.isfinite(self.bin_width) and self.bin_width > 0
+            _is_real(self.bin_width) and math.isfinite(self.bin_width) and self.bin_width > 0
         ):
             raise Error(f"invalid bin_width = {self.bin_width!r}: a positive length in metres")
         if self.resolution is not None and (
-            not isinstance(self.resolution, (int, np.integer)) or not 1 <= self.resolution <= 8192
+            not _is_int(self.resolution) or not 1 <= self.resolution <= 8192
         ):
             raise Error(f"invalid resolution = {self.resolution!r}: an integer in [1, 8192]")
-        if not isinstance(self.supersampling, (int, np.integer)) or not 1 <= self.supersampling <= 64:
+        if not _is_int(self.supersampling) or not 1 <= self.supersampling <= 64:
             raise Error(f"invalid supersampling = {self.supersampling!r}: an integer in [1, 64]")
         k = self.pixel_samples
         if k is not None and (
@@ -322,11 +352,14 @@ class Lidar:
             raise Error(f"invalid pixel_samples = {k!r} with coverage=\"analytic\": 1 (or None); "
                         "analytic coverage samples each pixel once to find its triangles")
         b = self.bistatic_angle
-        if not (isinstance(b, (int, float)) and 0.0 <= b < math.pi / 2):
+        if not (_is_real(b) and 0.0 <= b < math.pi / 2):
             raise Error(f"invalid bistatic_angle = {b!r}: radians in [0, pi/2)")
         if self.polarization is not None:
-            p = np.asarray(self.polarization, dtype=np.float64)
-            if p.shape != (4,) or not np.all(np.isfinite(p)) or p[0] <= 0:
+            try:
+                p = np.asarray(self.polarization, dtype=np.float64)
+            except (TypeError, ValueError):
+                p = np.full(1, np.nan)
+            if isinstance(self.polarization, (str, bytes)) or p.shape != (4,) or not np.all(np.isfinite(p)) or p[0] <= 0:
                 raise Error(
                     f"invalid polarization = {self.polarization!r}: a Stokes vector (4,) with S0 > 0"
                 )
@@ -343,7 +376,7 @@ class Lidar:
                     "(samples of the received power every pulse_sample_spacing seconds)"
                 )
             dt = self.pulse_sample_spacing
-            if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+            if not (_is_real(dt) and math.isfinite(dt) and dt > 0):
                 raise Error(f"invalid pulse_sample_spacing = {dt!r}: a positive, finite time in seconds")
             try:
                 ps = np.asarray(self.pulse_samples, dtype=np.float64)
@@ -454,6 +487,9 @@ class RenderResult:
     coverage: np.ndarray | None = None
     table_seconds: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
+    #: The sensor's wavelength (m) the render was made at (the materials' wavelength);
+    #: None for a result assembled by hand.
+    wavelength: float | None = None
 
     @property
     def range_axis(self) -> np.ndarray:
@@ -492,6 +528,11 @@ QUALITY: dict[str, dict[str, Any]] = {
 
 
 def _rotations(attitudes: Any) -> np.ndarray:
+    from .so3 import scipy_quaternions
+
+    q = scipy_quaternions(attitudes)
+    if q is not None:
+        attitudes = q.reshape(-1, 4)
     try:
         a = np.asarray(attitudes, dtype=np.float64)
     except (TypeError, ValueError) as e:
@@ -507,9 +548,51 @@ def _rotations(attitudes: Any) -> np.ndarray:
             raise Error("invalid attitudes: non-finite rotation matrix entries")
         return np.ascontiguousarray(a)
     raise Error(
-        f"invalid attitudes: shape {a.shape}; expected (N, 4) quaternions (w, x, y, z) or "
-        "(N, 3, 3) rotation matrices"
+        f"invalid attitudes: shape {a.shape}; expected (N, 4) quaternions (w, x, y, z), "
+        "(N, 3, 3) rotation matrices or a scipy Rotation"
     )
+
+
+class OffCentreWarning(UserWarning):
+    """The mesh lies far from the body origin (the rotation centre, range reference and
+    image centre): most of each image and range window is empty, and attitudes swing the
+    mesh about a point outside it. Usually a CAD model exported in another frame."""
+
+
+def _check_framing(scene: Scene, width: int) -> None:
+    """Refuse a render whose pixels are too coarse to see the mesh at all, and warn when
+    the mesh lies far from the body origin (the case that makes them so).
+
+    The image spans the bounding sphere about the body origin (radius ``scene.radius``),
+    ``width`` (sub-)pixels across. The mesh's own size is its bounding-box diagonal: no
+    attitude shows it wider. Below 2 pixels across, visibility samples can miss it
+    entirely (a cross-section of 0, or of whichever pixel a sample hits): no right answer
+    is possible, so the render is refused."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene._core.bounds)
+    size = float(np.linalg.norm(hi - lo))
+    offset = float(np.linalg.norm(0.5 * (lo + hi)))
+    pixel = 2.0 * scene.radius / width
+    if offset > size:
+        import warnings
+
+        warnings.warn(
+            f"the mesh's bounding-box centre is {offset:.4g} m from the body origin, more than "
+            f"its own size ({size:.4g} m): attitudes rotate the body about the origin, ranges "
+            f"are measured from it, and each image spans the sphere of radius "
+            f"{scene.radius:.4g} m about it, so the mesh covers about {size / pixel:.3g} of "
+            f"{width} pixels across. If the offset is not intended (a CAD model in another "
+            "frame), centre the mesh on its centre of mass, e.g. "
+            "mesh.apply_translation(-mesh.center_mass)",
+            OffCentreWarning,
+            stacklevel=3,
+        )
+    if size < 2.0 * pixel:
+        raise Error(
+            f"invalid resolution = {width}: the mesh ({size:.4g} m across) spans "
+            f"{size / pixel:.3g} pixel(s) of the {2 * scene.radius:.4g} m image (the sphere "
+            "about the body origin): too few to resolve it (at least 2 needed); raise "
+            "resolution or supersampling, or centre the mesh on the body origin"
+        )
 
 
 def render(
@@ -521,6 +604,12 @@ def render(
     device: str = "auto",
 ) -> RenderResult:
     """Render ``scene`` seen by ``sensor`` at every attitude, as one batch.
+
+    ``attitudes``: (N, 4) unit quaternions ``(w, x, y, z)`` (scalar first), (N, 3, 3)
+    rotation matrices or a ``scipy.spatial.transform.Rotation``, body to telescope
+    (module docstring). A mesh too small for the image's pixels (under 2 across: it lies
+    far from the body origin, or the resolution is tiny) is refused; one far from the body
+    origin warns (:class:`OffCentreWarning`).
 
     ``outputs``: any of ``"profile"``, ``"mueller"`` (needs ``polarization=None``),
     ``"stokes"`` (needs a ``polarization``), ``"range"`` (range map and coverage);
@@ -567,6 +656,7 @@ def render(
         topts["in_shader"] = True
     t_tables = 0.0 if reference else float(scene._core.prepare(float(sensor.bistatic_angle), **topts))
     res = sensor.effective_resolution(scene.radius)
+    _check_framing(scene, res * int(sensor.supersampling))
     pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]
     d = scene._core.render(
         rot,
@@ -597,6 +687,7 @@ def render(
         extent=float(d["extent"]),
         device=str(d["device"]),
         table_seconds=t_tables,
+        wavelength=float(sensor.wavelength),
     )
     if "profile" in d:
         p = d["profile"]

@@ -263,7 +263,8 @@ def material_kwargs(name: str, wavelength: float = 1064e-9, **kwargs: Any) -> Di
     """The keyword arguments :func:`get` passes to ``pprender.Material``.
 
     Starts from ``eta``, ``diffuse_albedo``, ``name`` (canonical, so "aluminum" gives
-    "aluminium") and the material's default roughness, then applies ``kwargs`` (which
+    "aluminium"), ``wavelength`` (the one given, which the constants are for) and the
+    material's default roughness, then applies ``kwargs`` (which
     win; ``name`` itself cannot be overridden here). A caller's ``m`` replaces
     the default ``alpha`` and vice versa. Unless the caller gives ``terms``, they are
     ``("single", "multiple", "diffuse")`` when the resulting ``diffuse_albedo`` is
@@ -276,6 +277,9 @@ def material_kwargs(name: str, wavelength: float = 1064e-9, **kwargs: Any) -> Di
         "eta": complex(*entry.nk[i]),
         "diffuse_albedo": float(entry.albedo[i]),
         "name": key,
+        # The material is labelled with the wavelength its constants are for, so that a
+        # sensor at another wavelength is refused by pprender.render.
+        "wavelength": float(wavelength),  # type: ignore[arg-type]
     }
     defaults = dict(entry.roughness)
     if "m" in kwargs:

@@ -12,7 +12,9 @@ Conventions (every function in this module):
   the rotation angle ``omega`` has density ``(1 - cos omega) / pi`` on ``[0, pi]``, so a
   geodesic ball of radius ``theta`` has measure ``(theta - sin theta) / pi``.
 * Quaternion inputs must have unit norm within 1e-6 (they are renormalized); other norms
-  or non-finite values raise :class:`pprender.Error`.
+  or non-finite values raise :class:`pprender.Error`. A ``scipy.spatial.transform.Rotation``
+  is accepted wherever quaternions are (scipy's own arrays are scalar-last
+  ``(x, y, z, w)``: pass the Rotation, not ``as_quat()``).
 
 The grid is Alexa's super-Fibonacci spiral: M. Alexa, "Super-Fibonacci Spirals: Fast,
 Low-Discrepancy Sampling of SO(3)", CVPR 2022, Algorithm 1. It is deterministic, exists
@@ -29,6 +31,7 @@ import numpy as np
 from ._core import Error
 
 __all__ = [
+    "scipy_quaternions",
     "angular_distance",
     "ball_radius",
     "covering_radius",
@@ -50,7 +53,22 @@ def _count(name: str, n: object, lo: int = 1, hi: int = 100_000_000) -> int:
     return int(n)
 
 
+def scipy_quaternions(x: object) -> np.ndarray | None:
+    """The ``(w, x, y, z)`` quaternions of a ``scipy.spatial.transform.Rotation`` (single:
+    ``(4,)``, stacked: ``(N, 4)``), or None when ``x`` is not one. scipy's arrays are
+    scalar-last ``(x, y, z, w)`` by default; pprender's are scalar-first, so Rotation
+    objects are accepted wherever attitudes go and converted here, never guessed from an
+    array's layout."""
+    if type(x).__module__.startswith("scipy.spatial.transform") and hasattr(x, "as_quat"):
+        q = np.asarray(x.as_quat(), dtype=np.float64)  # type: ignore[attr-defined]
+        return np.ascontiguousarray(q[..., [3, 0, 1, 2]])
+    return None
+
+
 def _quaternions(q: object, name: str) -> np.ndarray:
+    r = scipy_quaternions(q)
+    if r is not None:
+        q = r
     try:
         a = np.asarray(q, dtype=np.float64)
     except (TypeError, ValueError) as e:
