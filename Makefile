@@ -14,7 +14,7 @@ APT_PACKAGES := libllvm15 mesa-vulkan-drivers libvulkan1
 export NODEVICE_SELECT := 1
 export PYTHONHASHSEED := 0
 
-.PHONY: setup build demo test test-rust test-python bench docs clean
+.PHONY: setup build demo test test-rust test-python bench docs gpu-bundle clean
 
 setup: $(STAMP)/apt $(STAMP)/pip build
 
@@ -60,6 +60,10 @@ bench: setup
 docs: setup
 	$(PY) scripts/seed_table.py
 	$(PY) scripts/compare_microsurface.py
+
+# the wheels and the Vulkan loader that scripts/gpu_check.sh installs on a bare GPU machine
+gpu-bundle: setup
+	scripts/gpu_bundle.sh
 
 clean:
 	rm -rf target $(STAMP) $(VENV)

@@ -1,0 +1,244 @@
+"""The one-call GPU check: which adapter renders, does its f32 kernel agree with the f64
+CPU twin, and how fast is it, written to ``docs/gpu-benchmark.md``.
+
+Run through ``scripts/gpu_check.sh`` on a machine with only Python, NumPy and the wheels
+of ``scripts/gpu_bundle.sh`` (no Rust, no Mitsuba, no registry), or directly::
+
+    python scripts/gpu_check.py [--device gpu|cpu|auto] [--write PATH] [--budget SECONDS]
+
+1. ``pprender.device_info(device)``: the adapter, backend, driver and limits.
+2. Agreement: standard scenes (a smooth rough-aluminium sphere, the default 3U CubeSat with
+   single + double + multiple scattering, a bistatic tilted plate) rendered by the device
+   kernel (``arithmetic="f32"``) and by its f64 CPU twin (``arithmetic="f64"``: the same
+   tables, visibility samples and pulse integration in double precision). What differs
+   is f32 arithmetic, rasterizer ties (a sample exactly on an edge between two surfaces
+   can land on either: one pixel of a few thousand then sees another surface, and a
+   total or profile can move by ~2e-3) and, bistatic, the cast-shadow test (a shadow map
+   on the device, exact rays in the twin). Graded per pixel, on pixels above 1% of the
+   brightest: the 99th percentile of the largest Mueller/Stokes-element error relative
+   to the pixel's intensity, and the fraction of outlier pixels (error above 1e-2: ties,
+   or a broken kernel when there are many). The totals' and profiles' relative errors
+   are graded loosely (ties). Limits are well above what lavapipe measures here
+   (docs/gpu-benchmark.md lists both), loose enough for another device's f32
+   transcendental functions, tight enough to catch a wrong kernel.
+3. Throughput: realizations (attitudes) per second of the CubeSat at 128x128, for a
+   profile-only Stokes request and for the full model (Mueller profile + image + range),
+   batch sizes doubling from 1 until the rate grows by less than 10% (the plateau) or the
+   time budget runs out. Rates are batch / best of 3 calls after a warm-up call (device
+   creation, shader compilation and BRDF tables excluded and listed separately).
+
+Exit status 1 if any agreement check fails, 2 if the requested device is missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+import pprender
+from pprender import materials, models
+
+#: Largest allowed errors of the f32 kernel against the f64 twin (module docstring).
+LIMITS = {"total": 1e-2, "profile": 1e-2, "image_p99": 1e-3, "outliers": 2e-3}
+#: A pixel whose error exceeds this (relative to its intensity) is an outlier.
+OUTLIER = 1e-2
+RES = 128
+
+
+def _quaternions(n: int, seed: int) -> np.ndarray:
+    q = np.random.default_rng(seed).normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def cubesat() -> pprender.Scene:
+    mesh = models.cubesat("3U")
+    terms = ("single", "double", "multiple")
+    mats = {
+        "bus": materials.get("aluminium", alpha=0.15, terms=terms),
+        "solar_cells": materials.get("fused_silica", alpha=0.05),
+        "panel_back": materials.get("white_paint"),
+        "antenna": materials.get("aluminium", alpha=0.3, terms=terms),
+    }
+    return pprender.Scene(mesh, {p: mats[p] for p in mesh.metadata["pprender_parts"]})
+
+
+def scenes() -> list[tuple[str, pprender.Scene, dict[str, Any]]]:
+    sphere = pprender.Scene(models.sphere(0.5, 4), materials.get("aluminium", alpha=0.3), smooth=True)
+    plate = pprender.Scene(models.plate(0.6, 0.4, detail=2), materials.get("white_paint"))
+    return [
+        ("smooth sphere, aluminium alpha 0.3, Mueller", sphere, {}),
+        ("3U CubeSat, 4 materials, double bounce, Mueller", cubesat(), {}),
+        ("plate, white paint, bistatic 0.2 rad, Stokes (H)", plate,
+         {"bistatic_angle": 0.2, "polarization": [1.0, 1.0, 0.0, 0.0]}),
+    ]
+
+
+def _pixel_errors(a: np.ndarray, ref: np.ndarray, floor: float = 1e-2) -> np.ndarray:
+    """Per pixel, the largest |a - ref| over the elements relative to the reference's
+    intensity, on pixels above ``floor`` x the brightest."""
+    i0 = ref[..., 0, 0] if ref.ndim == 5 else ref[..., 0]
+    keep = i0 > floor * i0.max()
+    d = np.abs(a - ref).reshape(i0.shape + (-1,))
+    return d[keep].max(axis=-1) / i0[keep]
+
+
+def agreement(device: str) -> tuple[list[dict[str, Any]], bool]:
+    rows, ok = [], True
+    q = _quaternions(4, seed=2026)
+    for name, scene, kw in scenes():
+        mueller = kw.get("polarization") is None
+        out = ("profile", "mueller" if mueller else "stokes", "range")
+        r32 = pprender.render(scene, pprender.Lidar(resolution=96, pixel_samples=1, **kw), q, outputs=out,
+                              device=device)
+        r64 = pprender.render(scene, pprender.Lidar(resolution=96, pixel_samples=1, arithmetic="f64", **kw), q,
+                              outputs=out)
+        i32, i64 = (r.mueller if mueller else r.stokes for r in (r32, r64))
+        tot = np.abs(r32.cross_section - r64.cross_section).reshape(len(q), -1).max(axis=1)
+        s0 = (r64.cross_section[:, 0, 0] if mueller else r64.cross_section[:, 0])
+        px = _pixel_errors(i32, i64)
+        e = {
+            "total": float((tot / s0).max()),
+            "profile": float((np.abs(r32.profile - r64.profile).reshape(len(q), -1).sum(axis=1)
+                              / np.abs(r64.profile).reshape(len(q), -1).sum(axis=1)).max()),
+            "image_p99": float(np.percentile(px, 99)),
+            "outliers": float(np.mean(px > OUTLIER)),
+        }
+        passed = all(e[k] <= LIMITS[k] for k in LIMITS)
+        ok &= passed
+        rows.append({"scene": name, **e, "pixels": int(px.size), "pass": passed})
+        print(f"  {name}: total {e['total']:.2e}, profile {e['profile']:.2e}, pixels p99 {e['image_p99']:.2e}, "
+              f"outliers {e['outliers']:.1e} of {px.size}: {'pass' if passed else 'FAIL'}", flush=True)
+    return rows, ok
+
+
+def _rate(scene: pprender.Scene, sensor: pprender.Lidar, outputs: tuple[str, ...], n: int, device: str,
+          repeats: int = 3) -> float:
+    q = _quaternions(n, seed=n)
+    pprender.render(scene, sensor, q, outputs=outputs, device=device)  # warm-up (allocation sizes)
+    best = math.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        pprender.render(scene, sensor, q, outputs=outputs, device=device)
+        best = min(best, time.perf_counter() - t)
+    return n / best
+
+
+def throughput(device: str, budget: float, once: dict[str, float]) -> list[dict[str, Any]]:
+    scene = cubesat()
+    requests = [
+        ("profile only (Stokes, H)", pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0]),
+         ("profile",)),
+        ("full model (Mueller profile + image + range)", pprender.Lidar(resolution=RES, pixel_samples=1),
+         ("profile", "mueller", "range")),
+    ]
+    t = time.perf_counter()
+    scene.prepare(0.0)
+    once["BRDF tables of the CubeSat's materials (s; cached when the agreement built them)"] = (
+        time.perf_counter() - t)
+    t = time.perf_counter()
+    pprender.render(scene, requests[1][1], _quaternions(1, 0), outputs=requests[1][2], device=device)
+    once["first render, shaders compiled (s)"] = time.perf_counter() - t
+    rows = []
+    t_end = time.perf_counter() + budget
+    for label, sensor, outputs in requests:
+        n, prev = 1, 0.0
+        while True:
+            rate = _rate(scene, sensor, outputs, n, device)
+            rows.append({"request": label, "batch": n, "rate": rate})
+            print(f"  {label}, batch {n}: {rate:.1f} /s", flush=True)
+            plateau = n >= 16 and rate < 1.1 * prev
+            prev = max(prev, rate)
+            # the next batch costs about twice this one's four calls
+            if plateau or n >= 4096 or time.perf_counter() + 8 * n / rate > t_end:
+                break
+            n *= 2
+    twin = pprender.Lidar(resolution=RES, pixel_samples=1, polarization=[1, 1, 0, 0], arithmetic="f64")
+    rows.append({"request": "profile only (Stokes, H), f64 CPU twin", "batch": 16,
+                 "rate": _rate(scene, twin, ("profile",), 16, device)})
+    return rows
+
+
+def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[str, Any]],
+           once: dict[str, float], device: str, seconds: float) -> str:
+    lines = [
+        "# GPU check",
+        "",
+        "Written by `scripts/gpu_check.sh` (`scripts/gpu_check.py`); regenerate with it on the machine",
+        "named below. What it checks and how is in the script's docstring.",
+        "",
+        f"- adapter: **{info.get('name')}** ({info.get('backend')}, {info.get('device_type')}), "
+        f"driver {info.get('driver')} {info.get('driver_info', '')}".rstrip(),
+        f"- requested device: `{device}`; pprender {pprender.__version__}; Python {platform.python_version()}; "
+        f"numpy {np.__version__}; {os.cpu_count()} CPU threads ({platform.machine()})",
+        f"- run time: {seconds:.0f} s",
+        "",
+        "## Agreement: f32 device kernel against the f64 CPU twin",
+        "",
+        "Four random attitudes, 96x96 pixels, one visibility sample per pixel, the balanced tables; "
+        "pixels above 1% of the brightest. Limits: total and profile "
+        f"{LIMITS['total']:g} (rasterizer ties move them), 99th-percentile pixel error {LIMITS['image_p99']:g}, "
+        f"outlier pixels (error > {OUTLIER:g}) {LIMITS['outliers']:g} of the pixels.",
+        "",
+        "| scene | total (rel.) | profile (rel. L1) | pixel error, p99 | outlier pixels | pixels | result |",
+        "|---|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in agree:
+        lines.append(f"| {r['scene']} | {r['total']:.2e} | {r['profile']:.2e} | {r['image_p99']:.2e} | "
+                     f"{r['outliers']:.1e} | {r['pixels']} | {'pass' if r['pass'] else '**FAIL**'} |")
+    lines += [
+        "",
+        f"## Throughput: 3U CubeSat, {RES}x{RES}, one sample per pixel",
+        "",
+        "Realizations (attitudes) per second, batch / best of 3 calls after a warm-up call.",
+        "",
+        "| request | batch | realizations/s |",
+        "|---|---:|---:|",
+    ]
+    for r in speed:
+        lines.append(f"| {r['request']} | {r['batch']} | {r['rate']:.1f} |")
+    lines += ["", "One-off costs:", ""]
+    lines += [f"- {k}: {v:.3f}" for k, v in once.items()]
+    lines += ["", "Adapter limits:", ""]
+    lines += [f"- {k}: {v}" for k, v in sorted(info.items()) if k not in ("name", "backend", "device_type", "driver",
+                                                                            "driver_info")]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--device", default="gpu", choices=("gpu", "cpu", "auto"))
+    ap.add_argument("--write", default=None, help="write the markdown report here")
+    ap.add_argument("--budget", type=float, default=240.0, help="seconds for the throughput sweep")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    print(f"pprender {pprender.__version__} from {pprender.__file__}", flush=True)
+    t = time.perf_counter()
+    try:
+        info = pprender.device_info(a.device)
+    except pprender.Error as e:
+        print(f"no {a.device} device: {e}", file=sys.stderr)
+        return 2
+    once = {"device creation (s)": time.perf_counter() - t}
+    print("device_info:", info, flush=True)
+    print("agreement (f32 device kernel vs f64 CPU twin):", flush=True)
+    agree, ok = agreement(a.device)
+    print("throughput:", flush=True)
+    speed = throughput(a.device, a.budget, once)
+    text = report(info, agree, speed, once, a.device, time.perf_counter() - t0)
+    print(text)
+    if a.write:
+        with open(a.write, "w") as f:
+            f.write(text)
+        print(f"wrote {a.write}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
