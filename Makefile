@@ -44,7 +44,7 @@ build: $(STAMP)/pip
 	@$(VENV)/bin/maturin develop --release --quiet
 
 demo: setup
-	$(PY) -m pprender.demo
+	$(PY) examples/demo.py
 
 test-rust: $(STAMP)/apt
 	cargo test --release --quiet
@@ -55,7 +55,7 @@ test-python: setup
 test: setup test-rust test-python
 
 bench: setup
-	$(PY) -m pprender.bench
+	$(PY) benchmarks/bench.py
 
 docs: setup
 	$(PY) scripts/seed_table.py

@@ -13,12 +13,18 @@ from __future__ import annotations
 import glob
 import importlib.metadata
 import os
+import sys
+from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
 
 MITSUBA_VARIANT = "llvm_ad_mono_polarized"
+
+# The benchmarks live outside the package (benchmarks/, run as scripts); tests of their
+# measurements import them from there.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""The render benchmark's measurements (python -m pprender.bench_render)."""
+"""The render benchmark's measurements (python benchmarks/bench_render.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from pprender.bench_render import _peak_rss_mb
+from bench_render import _peak_rss_mb
 
 
 def test_a_fresh_process_reports_its_own_peak_memory() -> None:
@@ -23,7 +23,7 @@ def test_a_fresh_process_reports_its_own_peak_memory() -> None:
     assert here > 400, here
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     r = subprocess.run(
-        [sys.executable, "-c", "import numpy; from pprender.bench_render import _peak_rss_mb; print(_peak_rss_mb())"],
+        [sys.executable, "-c", "import numpy; from bench_render import _peak_rss_mb; print(_peak_rss_mb())"],
         capture_output=True, text=True, check=True, env=env,
     )
     child = float(r.stdout.strip().splitlines()[-1])

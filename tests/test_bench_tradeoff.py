@@ -1,10 +1,10 @@
-"""A small run of the speed/accuracy benchmark (python -m pprender.bench_tradeoff)."""
+"""A small run of the speed/accuracy benchmark (python benchmarks/bench_tradeoff.py)."""
 
 from __future__ import annotations
 
 import math
 
-from pprender import bench_tradeoff
+import bench_tradeoff
 
 
 def test_quick_tradeoff_is_ordered_and_finite():

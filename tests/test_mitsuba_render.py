@@ -19,7 +19,7 @@ import pytest
 
 import pprender
 from pprender import models
-from pprender.bench_render import mitsuba_monostatic_scene
+from bench_render import mitsuba_monostatic_scene
 
 RES = 64
 

@@ -243,7 +243,7 @@ def test_bad_device():
 def test_intensity_only_equals_the_stokes_s0_and_looks_up_fewer_elements():
     """Specialization: intensity-only output (M00 alone for an unpolarized transmitter, the
     first row's needed columns otherwise) must equal S0 of the full Stokes render."""
-    from pprender.bench_render import cubesat_scene, random_quaternions
+    from bench_render import cubesat_scene, random_quaternions
 
     scene = cubesat_scene(terms=("single", "multiple"))
     q = random_quaternions(3, seed=2)

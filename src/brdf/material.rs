@@ -114,7 +114,7 @@ impl MaterialSpec {
 
     /// Defaults for the double-bounce parameters. `DOUBLE_ORDER`: the quadrature of
     /// `double::eval_double` stays within 1e-4 of the term's M00 against order 384 (max
-    /// over the significant pairs of `python -m pprender.bench_double`: 1.3e-5, and at most
+    /// over the significant pairs of `python benchmarks/bench_double.py`: 1.3e-5, and at most
     /// 1.5e-5 on its pair construction with two other seeds, where order 128 reaches 1.7e-4
     /// on a near-grazing GGX pair; docs/double-bounce.md section 3).
     pub const DOUBLE_ORDER: usize = 160;

@@ -1,7 +1,7 @@
 """Double-bounce cost against accuracy: evaluations per second and error against the
 quadrature order, and the build time of the monostatic double-bounce tables.
 
-Run ``python -m pprender.bench_double`` (``--write`` also writes
+Run ``python benchmarks/bench_double.py`` (``--write`` also writes
 ``docs/double-bounce-benchmark.md``), or call :func:`main`.
 
 What is measured, in one process:
@@ -11,7 +11,7 @@ What is measured, in one process:
   (``terms=("double",)``, ``double_order=N``, coherent backscatter as by default):
 
   - throughput: ``brdf`` on random direction pairs uniform in solid angle (seeded, as in
-    ``pprender.bench``), best and median of ``repeats`` runs, the first call excluded. The
+    ``benchmarks/bench.py``), best and median of ``repeats`` runs, the first call excluded. The
     binding runs on one thread below 2048 pairs and a double-bounce evaluation costs
     milliseconds, so each timed call holds 2048 pairs: ``k`` random pairs (``k`` chosen so
     that a call takes about ``target_time``; all 2048 at low orders) spread evenly among
@@ -49,7 +49,7 @@ import numpy as np
 
 import pprender
 from pprender import _core
-from pprender.bench import cpu_model, emit_report, load_average, threads_available, timed, uniform_hemisphere
+from bench import cpu_model, emit_report, load_average, threads_available, timed, uniform_hemisphere
 
 SEED = 2024
 ORDERS = (16, 24, 32, 48, 64, 96, 128, 160, 192)
@@ -334,7 +334,7 @@ def _first_order_below(s: SweepResult, tol: float) -> int | None:
 def render(sweeps: list[SweepResult], tabs: list[TableResult], info: dict[str, Any]) -> str:
     L: list[str] = ["# Double-bounce benchmark: cost and accuracy against the quadrature order", ""]
     L.append(
-        f"`python -m pprender.bench_double` (best and median of {info['repeats']} runs; one-off costs excluded). "
+        f"`python benchmarks/bench_double.py` (best and median of {info['repeats']} runs; one-off costs excluded). "
         "The double term alone (`terms=(\"double\",)`, coherent backscatter on, the default), in the sp frame. "
         "The method, pair set and error definition are in the module docstring "
         "(`python/pprender/bench_double.py`)."
@@ -507,7 +507,7 @@ def main(repeats: int = 3, target_time: float = 0.15, seed: int = SEED,
 
 
 def _cli(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(prog="python -m pprender.bench_double", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python benchmarks/bench_double.py", description=__doc__.splitlines()[0])
     p.add_argument("-r", "--repeats", type=int, default=3, help="timed repetitions (default 3)")
     p.add_argument("-t", "--target-time", type=float, default=0.15,
                    help="seconds per timed throughput call (sets k; default 0.15)")

@@ -1,7 +1,7 @@
 """BRDF evaluation throughput: pprender next to Mitsuba 3's vectorized ``eval``.
 
-Run ``python -m pprender.bench`` (``--write`` also writes ``docs/benchmark.md``), or call
-:func:`main` (``pprender.bench.main(n=1_000_000)``).
+Run ``python benchmarks/bench.py`` (``--write`` also writes ``docs/benchmark.md``), or call
+:func:`main` (``bench.main(n=1_000_000)`` with ``benchmarks/`` on ``sys.path``).
 
 What is measured, in one process and interleaved round by round:
 
@@ -234,7 +234,9 @@ class MitsubaBench:
 _SUBPROCESS_SNIPPET = r"""
 import json, sys, time
 import numpy as np
-from pprender import bench, _core
+sys.path.insert(0, sys.argv[3])
+import bench
+from pprender import _core
 n, repeats = int(sys.argv[1]), int(sys.argv[2])
 wi, wo = bench.direction_pairs(n)
 out = {}
@@ -250,7 +252,7 @@ def _threads_subprocess(n: int, repeats: int, threads: int) -> dict[str, float] 
     env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
     try:
         r = subprocess.run(
-            [sys.executable, "-c", _SUBPROCESS_SNIPPET, str(n), str(repeats)],
+            [sys.executable, "-c", _SUBPROCESS_SNIPPET, str(n), str(repeats), str(Path(__file__).parent)],
             env=env,
             capture_output=True,
             text=True,
@@ -322,7 +324,7 @@ def render(results: list[Timing], reference: Timing | None, kernel_only: Timing 
     n = results[0].n
     lines = ["# BRDF evaluation throughput", ""]
     lines.append(
-        f"`python -m pprender.bench` ({n:,} random direction pairs, uniform in solid angle, seed {SEED}; "
+        f"`python benchmarks/bench.py` ({n:,} random direction pairs, uniform in solid angle, seed {SEED}; "
         f"best and median of {info['repeats']} runs, measured in the same process, interleaved; "
         "one-off costs excluded and listed below). Mueller BRDF in the Mitsuba frame, "
         "`frame=\"mitsuba\"`."
@@ -527,14 +529,14 @@ def emit_report(report: str, write: bool | str | os.PathLike[str], name: str, qu
 
 
 def default_output(name: str) -> Path:
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[1]
     if (root / "Cargo.toml").exists() and (root / "pyproject.toml").exists():
         return root / "docs" / name
     return Path.cwd() / "docs" / name
 
 
 def _cli(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(prog="python -m pprender.bench", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python benchmarks/bench.py", description=__doc__.splitlines()[0])
     p.add_argument("-n", "--n", type=int, default=1_000_000, help="direction pairs (default 1e6)")
     p.add_argument("-r", "--repeats", type=int, default=5, help="timed repetitions (default 5)")
     p.add_argument("--write", nargs="?", const=True, default=False, metavar="PATH",

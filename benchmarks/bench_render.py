@@ -1,6 +1,6 @@
 """Renderer benchmark: realizations per second, memory against batch size, and Mitsuba.
 
-``python -m pprender.bench_render [--write] [--device auto|cpu|gpu]`` prints a markdown
+``python benchmarks/bench_render.py [--write] [--device auto|cpu|gpu]`` prints a markdown
 report (``--write``: also to ``docs/render-benchmark.md``, or ``--write PATH``).
 
 Scene: the default 3U CubeSat of :func:`pprender.models.cubesat` (bus, deployed wings,
@@ -46,7 +46,7 @@ import numpy as np
 
 import pprender
 from pprender import materials, models
-from pprender.bench import cpu_model, emit_report, load_average, threads_available
+from bench import cpu_model, emit_report, load_average, threads_available
 
 RES = 128
 # a 100 ps FWHM Gaussian sampled every 5 ps over +-150 ps (the sampled-pulse path)
@@ -107,7 +107,7 @@ def memory_vs_n(ns: list[int], device: str) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
     for n in ns:
         r = subprocess.run(
-            [sys.executable, "-m", "pprender.bench_render", "--memory-child", str(n), "--device", device],
+            [sys.executable, __file__, "--memory-child", str(n), "--device", device],
             capture_output=True, text=True, check=False,
         )
         try:
@@ -144,7 +144,7 @@ def mitsuba_monostatic_scene(mi: Any, ply_path: str, extent: float, res: int, bs
 
 
 def mitsuba_stokes(scene_mesh: Any, extent: float, repeats: int) -> dict[str, Any]:
-    from pprender.bench import MitsubaBench  # reuse its LLVM preparation
+    from bench import MitsubaBench  # reuse its LLVM preparation
 
     MitsubaBench._prepare_llvm()
     import mitsuba as mi
@@ -248,7 +248,7 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
             mit = {"error": repr(e)}
     total_s = time.perf_counter() - t_start
 
-    L = ["# Renderer benchmark", "", f"`python -m pprender.bench_render` (module docstring: method).", ""]
+    L = ["# Renderer benchmark", "", f"`python benchmarks/bench_render.py` (module docstring: method).", ""]
     L.append(f"- Device: {info['name']} ({info['device_type']}, {info['driver_info']}); CPU: {cpu_model()}, "
              f"{threads_available()} threads; load average at start {load0}, at end {load_average()}.")
     L.append(f"- Scene: 3U CubeSat, {scene.n_faces} triangles, {RES}x{RES} pixels, monostatic, "
@@ -289,7 +289,7 @@ def main(repeats: int = 3, device: str = "auto", write: Any = False, quiet: bool
 
 
 def _cli(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(prog="python -m pprender.bench_render", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python benchmarks/bench_render.py", description=__doc__.splitlines()[0])
     p.add_argument("-r", "--repeats", type=int, default=3)
     p.add_argument("--device", default="auto")
     p.add_argument("--batch", type=int, default=64)

@@ -1,6 +1,6 @@
 """Distributed database build benchmark: realizations per second with 1 and 2 local workers.
 
-``python -m pprender.bench_distributed [--write [PATH]] [--workers 1,2]`` builds the same
+``python benchmarks/bench_distributed.py [--write [PATH]] [--workers 1,2]`` builds the same
 database (:func:`pprender.distributed.build_database_distributed`) once per worker count,
 in one run, and prints a markdown report (``--write``: also to
 ``docs/distributed-benchmark.md``, or ``--write PATH``).
@@ -47,7 +47,7 @@ import numpy as np
 
 import pprender
 from pprender import database, materials, models, so3
-from pprender.bench import cpu_model, emit_report, load_average, threads_available
+from bench import cpu_model, emit_report, load_average, threads_available
 from pprender.distributed import BuildSummary, build_database_distributed, describe_workers
 
 NAME = "distributed-benchmark.md"
@@ -234,7 +234,7 @@ def report(res: dict[str, Any], load_start: str, load_end: str, total: float) ->
     out = [
         "# Distributed database build benchmark",
         "",
-        "`python -m pprender.bench_distributed` (module docstring: method). Local Dask cluster on one machine; "
+        "`python benchmarks/bench_distributed.py` (module docstring: method). Local Dask cluster on one machine; "
         "each worker is a process with one Dask thread and `LP_NUM_THREADS=1` (one lavapipe render thread).",
         "",
         f"- Machine: {cpu_model()}, {threads_available()} threads; render device {', '.join(base['devices'])}; "
@@ -315,7 +315,7 @@ ESTIMATE = """## Paper estimate on N GPUs (not measured)
 No GPU measurement exists yet. Symbols:
 
 - `R_gpu`: realizations per second of one GPU for the database's sensor and shapes,
-  **not measured** (measure it with `python -m pprender.bench_render --device gpu`, profile
+  **not measured** (measure it with `python benchmarks/bench_render.py --device gpu`, profile
   only, at the database's resolution).
 - `A`: attitudes per chunk (default 256); `B`: range bins; a chunk is `A x B x 16 x 4` bytes
   of float32 Mueller profiles (`A x B x 4 x 4` for Stokes).
@@ -365,7 +365,7 @@ def main(workers: list[int] | None = None, n_attitudes: int = 2560, resolution: 
 
 
 def _cli(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(prog="python -m pprender.bench_distributed", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python benchmarks/bench_distributed.py", description=__doc__.splitlines()[0])
     p.add_argument("--workers", default="1,2", help="worker counts, comma-separated (default 1,2)")
     p.add_argument("--attitudes", type=int, default=2560, help="attitudes (default 2560)")
     p.add_argument("--resolution", type=int, default=64, help="image side in pixels (default 64)")
