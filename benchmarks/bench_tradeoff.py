@@ -389,7 +389,7 @@ HEADER = ("| scene | material | setting | pixels | ms / realization | image max 
 
 
 def summary(rows: list[Row]) -> str:
-    """Median over scenes of each setting's time and errors (the README's table)."""
+    """Median over scenes of each setting's time and errors (docs/speed-accuracy.md's table)."""
     lines = ["| setting | median ms / realization | median image RMS M00 | median profile L1 "
              "| worst profile L1 | worst total |", "|---|---:|---:|---:|---:|---:|"]
     for s in SETTINGS:

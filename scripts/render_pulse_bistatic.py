@@ -1,4 +1,4 @@
-"""Sampled pulses and bistatic totals: the numbers quoted in the README.
+"""Sampled pulses and bistatic totals: the numbers quoted in docs/rendering.md.
 
 ``python scripts/render_pulse_bistatic.py`` prints a markdown report and writes it to
 ``docs/render-pulse-bistatic.md``. The tests (tests/test_render_pulse.py,

@@ -1,6 +1,6 @@
 """pprender: polarized microfacet BRDFs and Pulse Polarization Ranging returns.
 
-Conventions (the full statement is at the top of ``src/optics/mod.rs`` and in the README):
+Conventions (the full statement is at the top of ``src/optics/mod.rs`` and in docs/physics.md):
 
 * Local frame with the macro normal ``n = +z``. ``wi`` points from the surface toward the
   transmitter, ``wo`` toward the receiver; both unit vectors with ``z >= 0``.
