@@ -23,12 +23,12 @@ import numpy as np
 from . import _core
 from ._core import BrdfTable, Error, Material, __version__, brdf_table
 from .lidar import SPEED_OF_LIGHT, Lidar, OffCentreWarning, RenderResult, Scene, device_info, render
-from . import classify, database, distributed, so3  # noqa: E402  (their heavy imports are lazy)
-from . import instrument  # noqa: E402
-from .classify import Classifier, NoMatchWarning
-from .instrument import Instrument, Measurement, PileUpWarning, expected_counts, measure
-from .database import build_database, open_database
-from .distributed import build_database_distributed
+from . import inverse  # noqa: E402  (its modules' heavy imports are lazy)
+from .inverse import classify, database, distributed, instrument, so3  # noqa: E402
+from .inverse.classify import Classifier, NoMatchWarning
+from .inverse.instrument import Instrument, Measurement, PileUpWarning, expected_counts, measure
+from .inverse.database import build_database, open_database
+from .inverse.distributed import build_database_distributed
 
 __all__ = [
     "BrdfTable",
@@ -42,6 +42,7 @@ __all__ = [
     "build_database_distributed",
     "distributed",
     "classify",
+    "inverse",
     "database",
     "open_database",
     "so3",
@@ -190,5 +191,6 @@ def __getattr__(name: str) -> object:
     if name in ("models", "fit", "plot", "materials", "mesh"):
         import importlib
 
+        # "fit" is pprender/fit.py, which makes itself pprender.inverse.fit
         return importlib.import_module("." + name, __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

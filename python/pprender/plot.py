@@ -155,7 +155,7 @@ def profile(data: Any, *, bin_edges: Any = None, index: int = 0, input_state: Se
 
     ``index`` selects the attitude (leading axis) if there is one. ``log``: log y axis.
     """
-    from .instrument import Instrument, Measurement, _channel_cross_sections, _profile_and_edges
+    from .inverse.instrument import Instrument, Measurement, _channel_cross_sections, _profile_and_edges
 
     plt = _plt()
     if ax is None:

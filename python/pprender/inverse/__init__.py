@@ -1,0 +1,28 @@
+"""Inversion: from rendered profiles to what an instrument records and back.
+
+* :mod:`~pprender.inverse.instrument`: the link budget, polarization channels, jitter,
+  background and shot noise (:func:`measure`);
+* :mod:`~pprender.inverse.database`: candidate databases, shapes x materials x attitudes
+  in a resumable Zarr store; :mod:`~pprender.inverse.distributed` builds them on Dask;
+* :mod:`~pprender.inverse.so3`: rotation grids and distances;
+* :mod:`~pprender.inverse.classify`: the vector classifier;
+* :mod:`~pprender.inverse.fit`: likelihood, nlopt and emcee fits (imported on first use:
+  it loads scipy's spatial module).
+
+The modules are also importable at their earlier paths (``pprender.instrument``, ...),
+which are the same module objects.
+"""
+
+from __future__ import annotations
+
+from . import classify, database, distributed, instrument, so3
+
+__all__ = ["classify", "database", "distributed", "fit", "instrument", "so3"]
+
+
+def __getattr__(name: str) -> object:
+    if name == "fit":
+        import importlib
+
+        return importlib.import_module(".fit", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,563 @@
+"""Vector classification of measured PPR profiles against a candidate database.
+
+Conventions (every function and class in this module):
+
+* A profile is a ``(B, C)`` array: ``B`` range bins on the database's common range grid
+  (:mod:`pprender.database`), ``C`` channels. Its feature vector is the profile
+  flattened bin-major, ``f[b * C + c] = profile[b, c]``, of length ``F = B C``.
+* Channels come from a *projection* of the database's Mueller profiles
+  ``(..., B, 4, 4) -> (..., B, C)`` (:func:`stokes_projection`,
+  :func:`co_cross_projection`, :func:`mueller_projection`), or are the stored Stokes
+  profiles of a database rendered with a transmitted polarization. Measurements are
+  given as ``(B, C)`` or ``(M, B, C)`` in the same channels (apply
+  ``classifier.projection`` to simulated Mueller profiles).
+* Score of a measurement ``x`` against a candidate ``y`` with a weight matrix ``W``:
+  ``s = <W x, W y> / (|W x| |W y|)`` in ``[-1, 1]``, 1 exactly when ``W x`` is a positive
+  multiple of ``W y``: insensitive to the overall intensity (range, aperture, gain).
+  A candidate with ``W y = 0`` scores 0.
+* Nothing is scored against nothing (:class:`pprender.Error` instead): a measurement
+  must have at least one positive value (counts cannot be negative: one that is all
+  zero, or zero and negative everywhere, e.g. a background-subtracted measurement with
+  no signal, has nothing to classify) and must not vanish under the weights
+  (``W x_o = 0`` at every range offset); and the candidates must not all vanish
+  (``W y = 0`` for every candidate). Channels are therefore intensities or include one
+  (``I`` of the Stokes channels, ``M00`` of the Mueller ones).
+* No match is not a match: :meth:`Classifier.top_k` warns (:class:`NoMatchWarning`)
+  for measurements whose best score is at most ``1e-9`` (zero up to rounding, or
+  negative: not even positively correlated with any candidate), and
+  :attr:`Matches.matched` is False for them; their "best" candidates are arbitrary.
+* Range offsets: measurements are not registered in absolute range. The score is the
+  maximum over integer offsets ``|o| <= max_shift`` of the score of ``x_o[b] = x[b + o]``
+  (zero beyond the ends). ``o > 0`` means the measurement lies ``o`` bins farther in range
+  than the candidate. Ties go to the smallest ``|o|`` (then the negative one).
+* Weights ``W`` (``F' x F``), learned from the candidates with labels of a ``target``
+  (``"shape"``, ``"material"`` or ``"attitude"``); candidates are first scaled to unit
+  norm (the score ignores intensity), and covariances are of these unit vectors:
+
+  - ``None``: ``W = I``, the plain cosine similarity.
+  - ``"whiten"``: ``W = (S_w + lambda I)^(-1/2)`` with ``S_w`` the pooled within-class
+    covariance (scatter of candidates about the mean of their target class, divided by
+    ``K - n_classes``) and ``lambda = regularization * trace(S_w) / F``. Directions in
+    which candidates of one class vary a lot (nuisance: for ``target="material"`` the
+    variation with shape and attitude) are damped; stable directions are emphasized.
+  - ``"lda"``: Fisher discriminant weighting. In the whitened space, the between-class
+    covariance ``S_b`` (class means about the overall mean, weighted by class size)
+    becomes ``W0 S_b W0 = V diag(mu) V^T`` with ``mu`` the Fisher ratios (between- over
+    within-class variance) of the directions ``V``; ``W = diag(sqrt(1 + mu)) V^T W0``
+    keeps every direction but stretches the discriminant ones. With ``n_components``
+    only the top ``n_components`` directions are kept (classical LDA, at most
+    ``n_classes - 1`` informative ones; with few of them many candidates tie).
+  - an array: ``(C,)`` per-channel or ``(B, C)`` per-feature weights (a diagonal ``W``),
+    or a matrix ``(F', F)``.
+
+  Learned weights need ``F <= 4096`` (an ``F x F`` eigen-decomposition); use a
+  projection with fewer channels otherwise.
+* Numbers are numbers: text, None or complex values in candidates, measurements,
+  weights or numeric parameters raise :class:`pprender.Error` naming the parameter.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .._core import Error
+from .instrument import _numeric_array
+
+__all__ = [
+    "Classifier",
+    "Matches",
+    "NoMatchWarning",
+    "Projection",
+    "co_cross_projection",
+    "mueller_projection",
+    "stokes_projection",
+]
+
+_TARGETS = ("shape", "material", "attitude")
+_MAX_LEARNED_FEATURES = 4096
+#: Best scores at or below this are no match (module docstring).
+_NO_MATCH_SCORE = 1e-9
+
+
+class NoMatchWarning(UserWarning):
+    """:meth:`Classifier.top_k`: some measurement matches no candidate (best score
+    ``<= 1e-9``); see :attr:`Matches.matched`."""
+
+
+# --------------------------------------------------------------------------- projections
+
+
+@dataclasses.dataclass(frozen=True)
+class Projection:
+    """A map from Mueller profiles ``(..., B, 4, 4)`` to channels ``(..., B, C)``
+    (``channels``: their names), applied with ``projection(mueller)``."""
+
+    fn: Callable[[np.ndarray], np.ndarray]
+    channels: tuple[str, ...]
+    description: str
+
+    def __call__(self, mueller: Any) -> np.ndarray:
+        m = np.asarray(mueller, dtype=np.float64)
+        if m.ndim < 3 or m.shape[-2:] != (4, 4):
+            raise Error(f"invalid profile for projection {self.description!r}: shape {m.shape}, expected (..., B, 4, 4)")
+        return self.fn(m)
+
+
+def stokes_projection(stokes_in: Sequence[float]) -> Projection:
+    """Received Stokes profiles for a transmitted Stokes vector ``stokes_in`` (4,) in the
+    transmit basis (:mod:`pprender.lidar`): ``S[..., b, :] = M[..., b, :, :] @ stokes_in``,
+    channels ``I Q U V`` in the receiver basis; what :func:`pprender.render` returns with
+    ``Lidar(polarization=stokes_in)``."""
+    s = _numeric_array(stokes_in, "stokes_in", "a Stokes vector (4,)")
+    if s.shape != (4,) or not np.all(np.isfinite(s)):
+        raise Error(f"invalid stokes_in = {stokes_in!r}: a finite Stokes vector (4,)")
+    return Projection(lambda m: m @ s, ("I", "Q", "U", "V"), f"stokes({s.tolist()})")
+
+
+def co_cross_projection(angle: float = 0.0) -> Projection:
+    """Co- and cross-polarized received intensities for linear transmission at ``angle``
+    (rad) from the transmit basis' ``x`` axis; channels ``co``, ``cross``.
+
+    The transmitted state is ``s = (1, cos 2a, sin 2a, 0)``. The transmit basis is
+    ``(x, y) = (X, -Y)`` monostatically (in general ``y = -Y`` and ``x`` tilted in the
+    ``XZ`` plane; :mod:`pprender.lidar`), so the same physical polarization is at ``-a`` in
+    the receiver basis ``(X, Y)``: ``co = (S0 + cos 2a S1 - sin 2a S2) / 2`` and
+    ``cross = (S0 - cos 2a S1 + sin 2a S2) / 2`` with ``S = M s``. A mirror facing the
+    sensor (``diag(1, 1, -1, -1)``) gives ``co = 1``, ``cross = 0`` at every angle."""
+    if not (isinstance(angle, (int, float, np.floating)) and np.isfinite(angle)):
+        raise Error(f"invalid angle = {angle!r}: a finite angle in radians")
+    c, s = np.cos(2.0 * angle), np.sin(2.0 * angle)
+    s_in = np.array([1.0, c, s, 0.0])
+    analyzers = 0.5 * np.array([[1.0, c, -s, 0.0], [1.0, -c, s, 0.0]])  # (2, 4)
+    return Projection(lambda m: (m @ s_in) @ analyzers.T, ("co", "cross"), f"co_cross(angle={float(angle)})")
+
+
+def mueller_projection() -> Projection:
+    """All 16 Mueller elements as channels (a full Mueller polarimeter), ``M_ij`` at
+    channel ``4 i + j``."""
+    names = tuple(f"M{i}{j}" for i in range(4) for j in range(4))
+    return Projection(lambda m: m.reshape(m.shape[:-2] + (16,)), names, "mueller")
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclasses.dataclass
+class Matches:
+    """The best ``k`` candidates per measurement (best first), arrays of shape (M, k):
+    ``index`` (into the classifier's candidates), ``score``, ``offset`` (range offset of
+    the measurement in bins, module docstring), and the candidates' labels ``shape``,
+    ``material`` (names), ``attitude_index`` and ``attitude`` (M, k, 4) quaternions, each
+    None when the classifier has no such labels. :attr:`matched` (M,) tells which
+    measurements match anything at all (best score above ``1e-9``); the others' rows
+    are no match (module docstring)."""
+
+    index: np.ndarray
+    score: np.ndarray
+    offset: np.ndarray
+    shape: np.ndarray | None
+    material: np.ndarray | None
+    attitude_index: np.ndarray | None
+    attitude: np.ndarray | None
+
+    @property
+    def matched(self) -> np.ndarray:
+        """(M,) bool: whether the best candidate scores above ``1e-9`` (a match at all)."""
+        return np.asarray(self.score)[:, 0] > _NO_MATCH_SCORE
+
+
+# --------------------------------------------------------------------------- classifier
+
+
+def _finite_array(x: Any, name: str) -> np.ndarray:
+    a = _numeric_array(x, name)
+    if not np.all(np.isfinite(a)):
+        raise Error(f"invalid {name}: NaN or infinite values")
+    return a
+
+
+def _inv_sqrt(s: np.ndarray) -> np.ndarray:
+    e, u = np.linalg.eigh(s)
+    return (u / np.sqrt(e)) @ u.T
+
+
+class Classifier:
+    """Scores measured profiles against every candidate of a database (module docstring).
+
+    Parameters
+    ----------
+    candidates : xarray.Dataset or array_like
+        A database from :func:`pprender.database.open_database` (every chunk complete;
+        candidates ordered shape, material, attitude, i.e. index
+        ``(i_shape * n_material + i_material) * n_attitude + i_attitude``), or an array of
+        candidate profiles ``(K, B, C)`` (or anything ``projection`` maps to that).
+    labels : Mapping[str, array_like], optional
+        For array candidates: ``"shape"`` (K,), ``"material"`` (K,), ``"attitude"``
+        (K, 4) quaternions, any subset (needed for learned weights' ``target``).
+    projection : Projection or callable, optional
+        Maps the candidates' profiles to channels. Default: for a database,
+        :func:`mueller_projection` (Mueller) or the stored Stokes channels; for arrays,
+        none.
+    weights : None, "whiten", "lda" or array_like
+        The weight matrix ``W`` (module docstring).
+    target : {"shape", "material", "attitude"}
+        The label whose classes define learned weights.
+    max_shift : int
+        Largest range offset searched, in bins (>= 0, below ``B``).
+    regularization : float
+        Relative ridge ``lambda / (trace(S_w) / F)`` for learned weights, > 0.
+    n_components : int, optional
+        For ``"lda"``: keep only this many discriminant directions.
+    """
+
+    def __init__(
+        self,
+        candidates: Any,
+        *,
+        labels: Mapping[str, Any] | None = None,
+        projection: Projection | Callable[[np.ndarray], np.ndarray] | None = None,
+        weights: Any = None,
+        target: str = "material",
+        max_shift: int = 0,
+        regularization: float = 1e-2,
+        n_components: int | None = None,
+    ) -> None:
+        self.projection = projection
+        self.labels: dict[str, np.ndarray] = {}
+        #: (B,) range bin centres (m) for a database, else None.
+        self.range: np.ndarray | None = None
+        if _is_dataset(candidates):
+            if labels is not None:
+                raise Error("invalid labels: a database's labels come from its coordinates; pass labels only with arrays")
+            feats = self._from_database(candidates, projection)
+        else:
+            if projection is not None:
+                feats = np.asarray(projection(_finite_array(candidates, "candidates")))
+            else:
+                feats = np.asarray(candidates)
+            feats = _finite_array(feats, "candidates")
+            self._set_labels(labels, len(feats) if feats.ndim else 0)
+        if feats.ndim != 3 or feats.shape[0] == 0 or feats.shape[1] == 0 or feats.shape[2] == 0:
+            raise Error(f"invalid candidates: shape {feats.shape}, expected (K, B, C) with K, B, C >= 1 (an empty database?)")
+        if not np.any(feats != 0):
+            raise Error("invalid candidates: every candidate profile is all zero (nothing to match against)")
+        self.features = feats  # (K, B, C)
+        K, B, C = feats.shape
+        if isinstance(max_shift, (bool, np.bool_)) or not isinstance(max_shift, (int, np.integer)) or not 0 <= max_shift < B:
+            raise Error(f"invalid max_shift = {max_shift!r}: an integer in [0, {B - 1}] (bins)")
+        self.max_shift = int(max_shift)
+        if not (isinstance(regularization, (int, float, np.floating)) and np.isfinite(regularization) and regularization > 0):
+            raise Error(f"invalid regularization = {regularization!r}: a positive number")
+        if target not in _TARGETS:
+            raise Error(f"invalid target = {target!r}: one of {_TARGETS}")
+        if n_components is not None and not (isinstance(weights, str) and weights == "lda"):
+            raise Error(
+                f"invalid n_components = {n_components!r}: it applies only to weights=\"lda\" (weights = {weights!r})"
+            )
+        self.target = target
+        self.weights = self._weights(weights, target, float(regularization), n_components)
+        y = self._apply(feats.reshape(K, B * C))
+        norm = np.linalg.norm(y, axis=1, keepdims=True)
+        if not np.any(norm > 0):
+            raise Error(
+                "invalid candidates/weights: W y = 0 for every candidate (the weights give zero weight to "
+                "everything the candidates contain), so every score would be 0"
+            )
+        self._y = np.divide(y, norm, out=np.zeros_like(y), where=norm > 0)  # (K, F'), unit rows
+
+    # ------------------------------------------------------------------ construction
+
+    def _from_database(self, ds: Any, projection: Any) -> np.ndarray:
+        if "profile" not in ds or "complete" not in ds:
+            raise Error("invalid candidates: not a pprender database (no profile/complete variables)")
+        if ds.sizes.get("shape", 0) * ds.sizes.get("material", 0) * ds.sizes.get("attitude", 0) == 0:
+            raise Error("invalid candidates: the database is empty")
+        done = np.asarray(ds["complete"].values, dtype=bool)
+        if not done.all():
+            raise Error(
+                f"invalid candidates: the database is incomplete ({int((~done).sum())} of {done.size} "
+                "chunks pending); finish it with build_database or write_chunk"
+            )
+        stokes = "stokes" in ds["profile"].dims
+        if projection is None:
+            projection = (lambda p: p) if stokes else mueller_projection()
+            self.projection = None if stokes else projection
+        elif stokes:
+            raise Error("invalid projection: this database stores Stokes profiles (no Mueller matrices to project)")
+        n_s, n_m, n_a = ds.sizes["shape"], ds.sizes["material"], ds.sizes["attitude"]
+        blocks = []
+        for i in range(n_s):
+            for j in range(n_m):
+                p = np.asarray(ds["profile"].isel(shape=i, material=j).values, dtype=np.float64)
+                blocks.append(np.asarray(projection(p), dtype=np.float64))
+        feats = np.concatenate(blocks)
+        self.labels = {
+            "shape": np.repeat(np.asarray(ds["shape"].values, dtype=object), n_m * n_a),
+            "material": np.tile(np.repeat(np.asarray(ds["material"].values, dtype=object), n_a), n_s),
+            "attitude_index": np.tile(np.arange(n_a), n_s * n_m),
+            "attitude": np.tile(np.asarray(ds["quaternion"].values, dtype=np.float64), (n_s * n_m, 1)),
+        }
+        self.range = np.asarray(ds["range"].values)
+        return _finite_array(feats, "database profiles")
+
+    def _set_labels(self, labels: Mapping[str, Any] | None, K: int) -> None:
+        if labels is None:
+            return
+        for key, v in labels.items():
+            if key not in ("shape", "material", "attitude"):
+                raise Error(f"invalid labels key {key!r}: one of 'shape', 'material', 'attitude'")
+            a = np.asarray(v, dtype=np.float64 if key == "attitude" else object)
+            want = (K, 4) if key == "attitude" else (K,)
+            if a.shape != want:
+                raise Error(f"invalid labels[{key!r}]: shape {a.shape}, expected {want}")
+            self.labels[key] = a
+        if "attitude" in self.labels:
+            _, inv = np.unique(self.labels["attitude"], axis=0, return_inverse=True)
+            self.labels["attitude_index"] = inv.ravel()
+
+    def _classes(self, target: str) -> np.ndarray:
+        key = "attitude_index" if target == "attitude" else target
+        if key not in self.labels:
+            raise Error(f"invalid target = {target!r}: the candidates have no {target} labels (pass labels=...)")
+        _, inv = np.unique(np.asarray(self.labels[key]).astype(str), return_inverse=True)
+        return inv.ravel()
+
+    def _weights(self, weights: Any, target: str, reg: float, n_components: int | None) -> np.ndarray | None:
+        K, B, C = self.features.shape
+        F = B * C
+        if weights is None:
+            return None
+        if isinstance(weights, str):
+            if weights not in ("whiten", "lda"):
+                raise Error(f'invalid weights = {weights!r}: None, "whiten", "lda" or an array')
+            if F > _MAX_LEARNED_FEATURES:
+                raise Error(
+                    f"invalid weights = {weights!r}: {F} features (B = {B} bins x C = {C} channels) is "
+                    f"more than {_MAX_LEARNED_FEATURES}; use a projection with fewer channels"
+                )
+            cls = self._classes(target)
+            x = self.features.reshape(K, F)
+            n = np.linalg.norm(x, axis=1, keepdims=True)
+            x = np.divide(x, n, out=np.zeros_like(x), where=n > 0)
+            n_cls = int(cls.max()) + 1
+            counts = np.bincount(cls, minlength=n_cls).astype(np.float64)
+            means = np.zeros((n_cls, F))
+            np.add.at(means, cls, x)
+            means /= counts[:, None]
+            r = x - means[cls]
+            dof = max(K - n_cls, 1)
+            s_w = r.T @ r / dof
+            lam = reg * (np.trace(s_w) / F if np.trace(s_w) > 0 else 1.0)
+            w0 = _inv_sqrt(s_w + lam * np.eye(F))
+            if weights == "whiten":
+                return w0
+            d = means - (counts @ means) / K
+            s_b = (d.T * counts) @ d / K
+            mu, v = np.linalg.eigh(w0 @ s_b @ w0)
+            mu, v = np.clip(mu[::-1], 0.0, None), v[:, ::-1]
+            if n_components is not None:
+                if isinstance(n_components, (bool, np.bool_)) or not isinstance(n_components, (int, np.integer)) or not 1 <= n_components <= F:
+                    raise Error(f"invalid n_components = {n_components!r}: an integer in [1, {F}]")
+                mu, v = mu[:n_components], v[:, :n_components]
+            return (np.sqrt(1.0 + mu)[:, None] * v.T) @ w0
+        w = _finite_array(weights, "weights")
+        if w.shape == (C,):
+            return np.tile(w, B)
+        if w.shape == (B, C):
+            return w.reshape(F)
+        if w.ndim == 2 and w.shape[1] == F and w.shape[0] >= 1:
+            return w
+        raise Error(f"invalid weights: shape {w.shape}, expected ({C},), ({B}, {C}) or (F', {F})")
+
+    def _apply(self, x: np.ndarray) -> np.ndarray:
+        if self.weights is None:
+            return x
+        if self.weights.ndim == 1:
+            return x * self.weights
+        return x @ self.weights.T
+
+    # ------------------------------------------------------------------ scoring
+
+    @property
+    def n_candidates(self) -> int:
+        return int(self.features.shape[0])
+
+    def _registered(self, m: Any) -> np.ndarray:
+        """A :class:`pprender.Measurement`'s background-subtracted counts placed on the
+        database's range grid (its bins must have the database's width and lie on the same
+        grid of multiples of it: those of :func:`pprender.render`)."""
+        if self.range is None:
+            raise Error("invalid measurements: a Measurement needs a classifier built from a database "
+                        "(its range grid); pass (M, B, C) arrays otherwise")
+        counts = np.asarray(m.counts, dtype=np.float64) - np.asarray(m.background, dtype=np.float64)
+        edges = np.asarray(m.bin_edges, dtype=np.float64)
+        w = float(self.range[1] - self.range[0])
+        lo = float(self.range[0] - 0.5 * w)
+        nb = counts.shape[-2]
+        start = (edges[0] - lo) / w
+        k = int(round(start))
+        if (abs(start - k) > 1e-6 or edges.shape != (nb + 1,)
+                or abs((edges[-1] - edges[0]) / nb - w) > 1e-9 * w):
+            raise Error(f"invalid measurements: bin edges {edges[0]:.6g}..{edges[-1]:.6g} m ({nb} bins) are "
+                        f"not on the database's grid of {w:.6g} m bins starting at {lo:.6g} m")
+        B = len(self.range)
+        out = np.zeros(counts.shape[:-2] + (B, counts.shape[-1]))
+        a, b = max(k, 0), min(k + nb, B)
+        if a >= b:
+            raise Error("invalid measurements: no bin inside the database's range window")
+        out[..., a:b, :] = counts[..., a - k:b - k, :]
+        return out
+
+    def _measurements(self, measurements: Any) -> tuple[np.ndarray, bool]:
+        if hasattr(measurements, "counts") and hasattr(measurements, "bin_edges"):
+            measurements = self._registered(measurements)
+        x = _finite_array(measurements, "measurements")
+        single = x.ndim == 2
+        if single:
+            x = x[None]
+        _, B, C = self.features.shape
+        if x.ndim != 3 or x.shape[1:] != (B, C):
+            raise Error(
+                f"invalid measurements: shape {x.shape}, expected (M, {B}, {C}) or ({B}, {C}): "
+                f"{B} range bins on the database grid and {C} channels"
+            )
+        if len(x) == 0:
+            raise Error("invalid measurements: none given (M = 0)")
+        zero = ~np.any(x != 0, axis=(1, 2))
+        if zero.any():
+            raise Error(f"invalid measurements: measurement(s) {np.flatnonzero(zero)[:10].tolist()} are all zero")
+        nonpositive = ~np.any(x > 0, axis=(1, 2))
+        if nonpositive.any():
+            raise Error(
+                f"invalid measurements: measurement(s) {np.flatnonzero(nonpositive)[:10].tolist()} have no "
+                "positive value (zero or negative everywhere): photon counts cannot be negative, so there is "
+                "no signal to classify (a background-subtracted measurement with no signal above the background?)"
+            )
+        return x, single
+
+    def _offsets(self) -> list[int]:
+        out = [0]
+        for o in range(1, self.max_shift + 1):
+            out += [o, -o]
+        return out
+
+    def _scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Best scores and offsets (M, K), and whether ``W x_o != 0`` at some offset (M,)."""
+        M, B, C = x.shape
+        K = self.n_candidates
+        best = np.full((M, K), -np.inf)
+        offset = np.zeros((M, K), dtype=np.int64)
+        seen = np.zeros(M, dtype=bool)
+        for o in self._offsets():
+            xo = np.zeros_like(x)
+            if o >= 0:
+                xo[:, : B - o] = x[:, o:]
+            else:
+                xo[:, -o:] = x[:, : B + o]
+            z = self._apply(xo.reshape(M, B * C))
+            nz = np.linalg.norm(z, axis=1, keepdims=True)
+            seen |= nz[:, 0] > 0
+            z = np.divide(z, nz, out=np.zeros_like(z), where=nz > 0)
+            s = z @ self._y.T
+            better = s > best
+            best[better] = s[better]
+            offset[better] = o
+        return best, offset, seen
+
+    def scores(self, measurements: Any, *, return_offsets: bool = False) -> Any:
+        """Scores of every measurement against every candidate.
+
+        Parameters
+        ----------
+        measurements : array_like or pprender.Measurement
+            (M, B, C) or (B, C) profiles in the candidates' channels and range grid, or a
+            :class:`pprender.Measurement` (its counts less the expected background, placed on
+            the database's range grid; the classifier must come from a database).
+        return_offsets : bool
+            Also return the best range offset (bins) per pair.
+
+        Returns
+        -------
+        numpy.ndarray
+            (M, K) scores in [-1, 1] ((K,) for one measurement); with ``return_offsets``
+            a pair (scores, offsets).
+
+        Raises
+        ------
+        pprender.Error
+            For a measurement with no positive value or one that vanishes under the
+            weights (module docstring).
+        """
+        x, single = self._measurements(measurements)
+        out_s = np.empty((len(x), self.n_candidates))
+        out_o = np.empty((len(x), self.n_candidates), dtype=np.int64)
+        seen = np.empty(len(x), dtype=bool)
+        step = max(1, int(4e6 // max(self.n_candidates, 1)))  # bound the (M, K) temporaries
+        for i in range(0, len(x), step):
+            out_s[i : i + step], out_o[i : i + step], seen[i : i + step] = self._scores(x[i : i + step])
+        if not seen.all():
+            raise Error(
+                f"invalid measurements: measurement(s) {np.flatnonzero(~seen)[:10].tolist()} vanish under the "
+                "weights (W x = 0 at every range offset): their signal lies only in features the weights "
+                "ignore, so every score would be 0"
+            )
+        if single:
+            out_s, out_o = out_s[0], out_o[0]
+        return (out_s, out_o) if return_offsets else out_s
+
+    def top_k(self, measurements: Any, k: int = 5) -> Matches:
+        """The ``k`` best candidates per measurement, best first (ties: lower index
+        first), with their scores, range offsets and labels (:class:`Matches`; arrays
+        (M, k), also for a single (B, C) measurement).
+
+        A measurement whose best score is at most ``1e-9`` matches nothing: a
+        :class:`NoMatchWarning` names it and ``Matches.matched`` is False for it (its
+        rows are still filled, by score then index, but are not matches). Raises as
+        :meth:`scores` does."""
+        x, _ = self._measurements(measurements)
+        K = self.n_candidates
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= K:
+            raise Error(f"invalid k = {k!r}: an integer in [1, {K}]")
+        s, o = self.scores(x, return_offsets=True)
+        idx = np.empty((len(x), k), dtype=np.int64)
+        for m in range(len(x)):
+            part = np.argpartition(-s[m], k - 1)[:k] if k < K else np.arange(K)
+            # every candidate scoring as well as the k-th is eligible; order by score, index
+            cut = s[m, part].min()
+            cand = np.flatnonzero(s[m] >= cut)
+            order = np.lexsort((cand, -s[m, cand]))
+            idx[m] = cand[order[:k]]
+        rows = np.arange(len(x))[:, None]
+        none = np.flatnonzero(s[rows[:, 0], idx[:, 0]] <= _NO_MATCH_SCORE)
+        if len(none):
+            warnings.warn(
+                f"top_k: measurement(s) {none[:10].tolist()}{' ...' if len(none) > 10 else ''} match no "
+                f"candidate: best score {float(s[none[0], idx[none[0], 0]]):.3g} <= {_NO_MATCH_SCORE:g} "
+                "(not even positively correlated with any candidate; signal outside the candidates' "
+                "range window or channels?). Their rows are not matches: see Matches.matched",
+                NoMatchWarning,
+                stacklevel=2,
+            )
+        lab = self.labels
+        return Matches(
+            index=idx,
+            score=s[rows, idx],
+            offset=o[rows, idx],
+            shape=lab["shape"][idx] if "shape" in lab else None,
+            material=lab["material"][idx] if "material" in lab else None,
+            attitude_index=lab["attitude_index"][idx] if "attitude_index" in lab else None,
+            attitude=lab["attitude"][idx] if "attitude" in lab else None,
+        )
+
+
+def _is_dataset(x: Any) -> bool:
+    try:
+        import xarray as xr
+    except ImportError:  # pragma: no cover - xarray is needed for databases anyway
+        return False
+    return isinstance(x, xr.Dataset)

@@ -1,0 +1,204 @@
+"""One render call: attitudes checked and converted, the sensor's settings resolved, the
+scene's tables prepared, the request handed to the Rust renderer and its arrays shaped
+into a :class:`~pprender.lidar.result.RenderResult`."""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from .. import _core
+from .._core import Error
+from .result import _OUTPUTS, RenderResult
+from .scene import Scene
+from .sensor import Lidar
+
+
+def device_info(device: str = "auto") -> dict[str, Any]:
+    """Which adapter renders: name, backend, device type, driver and the limits used.
+
+    ``device``: ``"auto"`` (a GPU when present, else the CPU implementation lavapipe),
+    ``"cpu"`` (lavapipe even when a GPU is present) or ``"gpu"`` (error without one).
+    """
+    return dict(_core.device_info(device))
+
+
+def _rotations(attitudes: Any) -> np.ndarray:
+    from ..inverse.so3 import scipy_quaternions
+
+    q = scipy_quaternions(attitudes)
+    if q is not None:
+        attitudes = q.reshape(-1, 4)
+    try:
+        a = np.asarray(attitudes, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise Error(f"invalid attitudes: not a float array ({e})") from None
+    if a.ndim == 1 and a.shape == (4,):
+        a = a[None]
+    if a.ndim == 2 and a.shape == (3, 3):
+        a = a[None]
+    if a.ndim == 2 and a.shape[1] == 4:
+        return np.asarray(_core.quaternions_to_rotations(np.ascontiguousarray(a)))
+    if a.ndim == 3 and a.shape[1:] == (3, 3):
+        if not np.all(np.isfinite(a)):
+            raise Error("invalid attitudes: non-finite rotation matrix entries")
+        return np.ascontiguousarray(a)
+    raise Error(
+        f"invalid attitudes: shape {a.shape}; expected (N, 4) quaternions (w, x, y, z), "
+        "(N, 3, 3) rotation matrices or a scipy Rotation"
+    )
+
+
+class OffCentreWarning(UserWarning):
+    """The mesh lies far from the body origin (the rotation centre, range reference and
+    image centre): most of each image and range window is empty, and attitudes swing the
+    mesh about a point outside it. Usually a CAD model exported in another frame."""
+
+
+def _check_framing(scene: Scene, width: int) -> None:
+    """Refuse a render whose pixels are too coarse to see the mesh at all, and warn when
+    the mesh lies far from the body origin (the case that makes them so).
+
+    The image spans the bounding sphere about the body origin (radius ``scene.radius``),
+    ``width`` (sub-)pixels across. The mesh's own size is its bounding-box diagonal: no
+    attitude shows it wider. Below 2 pixels across, visibility samples can miss it
+    entirely (a cross-section of 0, or of whichever pixel a sample hits): no right answer
+    is possible, so the render is refused."""
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene._core.bounds)
+    size = float(np.linalg.norm(hi - lo))
+    offset = float(np.linalg.norm(0.5 * (lo + hi)))
+    pixel = 2.0 * scene.radius / width
+    if offset > size:
+        import warnings
+
+        warnings.warn(
+            f"the mesh's bounding-box centre is {offset:.4g} m from the body origin, more than "
+            f"its own size ({size:.4g} m): attitudes rotate the body about the origin, ranges "
+            f"are measured from it, and each image spans the sphere of radius "
+            f"{scene.radius:.4g} m about it, so the mesh covers about {size / pixel:.3g} of "
+            f"{width} pixels across. If the offset is not intended (a CAD model in another "
+            "frame), centre the mesh on its centre of mass, e.g. "
+            "mesh.apply_translation(-mesh.center_mass)",
+            OffCentreWarning,
+            stacklevel=3,
+        )
+    if size < 2.0 * pixel:
+        raise Error(
+            f"invalid resolution = {width}: the mesh ({size:.4g} m across) spans "
+            f"{size / pixel:.3g} pixel(s) of the {2 * scene.radius:.4g} m image (the sphere "
+            "about the body origin): too few to resolve it (at least 2 needed); raise "
+            "resolution or supersampling, or centre the mesh on the body origin"
+        )
+
+
+def render(
+    scene: Scene,
+    sensor: Lidar,
+    attitudes: Any,
+    outputs: Sequence[str] = ("profile", "mueller", "range"),
+    *,
+    device: str = "auto",
+) -> RenderResult:
+    """Render ``scene`` seen by ``sensor`` at every attitude, as one batch.
+
+    ``attitudes``: (N, 4) unit quaternions ``(w, x, y, z)`` (scalar first), (N, 3, 3)
+    rotation matrices or a ``scipy.spatial.transform.Rotation``, body to telescope
+    (module docstring). A mesh too small for the image's pixels (under 2 across: it lies
+    far from the body origin, or the resolution is tiny) is refused; one far from the body
+    origin warns (:class:`OffCentreWarning`).
+
+    ``outputs``: any of ``"profile"``, ``"mueller"`` (needs ``polarization=None``),
+    ``"stokes"`` (needs a ``polarization``), ``"range"`` (range map and coverage);
+    ``cross_section`` is always returned. Only what is requested is computed and read
+    back. Batches are split into chunks that fit the device; results equal single calls.
+    ``device``: ``"auto"``, ``"cpu"`` (lavapipe) or ``"gpu"`` (see :func:`device_info`).
+    """
+    if not isinstance(scene, Scene):
+        raise Error(f"invalid scene of type {type(scene).__name__}: expected pprender.Scene")
+    if not isinstance(sensor, Lidar):
+        raise Error(f"invalid sensor of type {type(sensor).__name__}: expected pprender.Lidar")
+    if isinstance(outputs, str):
+        outputs = (outputs,)
+    bad = [o for o in outputs if o not in _OUTPUTS]
+    if bad:
+        raise Error(f"invalid outputs {bad}: choose from {_OUTPUTS}")
+    if "mueller" in outputs and sensor.polarization is not None:
+        raise Error(
+            'invalid outputs: "mueller" needs Lidar(polarization=None); with a transmitted '
+            'polarization request "stokes"'
+        )
+    if sensor.intensity_only and ("stokes" in outputs or "mueller" in outputs):
+        raise Error('invalid outputs: Lidar(intensity_only=True) renders "intensity" images, not '
+                    '"stokes" or "mueller"')
+    if "intensity" in outputs and not sensor.intensity_only:
+        raise Error('invalid outputs: "intensity" needs Lidar(intensity_only=True, polarization=...)')
+    if "stokes" in outputs and sensor.polarization is None:
+        raise Error('invalid outputs: "stokes" needs Lidar(polarization=...) (a Stokes vector)')
+    for m in scene.materials:
+        if abs(m.wavelength - sensor.wavelength) > 1e-6 * sensor.wavelength:
+            raise Error(
+                f"invalid wavelength = {sensor.wavelength!r}: the scene's material "
+                f"{m.name or m!r} was built for {m.wavelength!r} m; build the materials at "
+                "the sensor's wavelength"
+            )
+    if device not in ("auto", "cpu", "lavapipe", "gpu"):
+        raise Error(f'invalid device = {device!r}: one of "auto", "cpu" (lavapipe), "gpu"')
+    rot = _rotations(attitudes)
+    if len(rot) == 0:
+        raise Error("invalid attitudes: empty batch (N = 0)")
+    reference = sensor.quality == "reference"
+    topts: dict[str, Any] = {} if reference else dict(sensor.table_options())
+    if sensor.brdf == "shader":
+        topts["in_shader"] = True
+    t_tables = 0.0 if reference else float(scene._core.prepare(float(sensor.bistatic_angle), **topts))
+    res = sensor.effective_resolution(scene.radius)
+    _check_framing(scene, res * int(sensor.supersampling))
+    pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]
+    d = scene._core.render(
+        rot,
+        resolution=res,
+        supersampling=int(sensor.supersampling),
+        samples=sensor.effective_pixel_samples(),
+        bistatic_angle=float(sensor.bistatic_angle),
+        polarization=pol,
+        intensity_only=bool(sensor.intensity_only),
+        sigma_range=sensor.sigma_range,
+        bin_width=sensor.effective_bin_width(),
+        image=("mueller" in outputs or "stokes" in outputs or "intensity" in outputs),
+        range="range" in outputs,
+        profile="profile" in outputs,
+        device="reference" if reference else ("twin" if sensor.effective_arithmetic() == "f64" else device),
+        pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
+        pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
+        analytic=sensor.coverage == "analytic",
+        **topts,
+    )
+    n = len(rot)
+    mueller_out = pol is None
+    tot = d["total"]
+    r = RenderResult(
+        cross_section=tot.reshape(n, 4, 4) if mueller_out else (tot[:, 0] if sensor.intensity_only else tot),
+        bin_edges=d["bin_edges"],
+        pixel_size=float(d["pixel_size"]),
+        extent=float(d["extent"]),
+        device=str(d["device"]),
+        table_seconds=t_tables,
+        wavelength=float(sensor.wavelength),
+    )
+    if "profile" in d:
+        p = d["profile"]
+        r.profile = p.reshape(n, p.shape[1], 4, 4) if mueller_out else (p[..., 0] if sensor.intensity_only else p)
+    if "image" in d:
+        img = d["image"]
+        if mueller_out:
+            r.mueller = img.reshape(img.shape[:3] + (4, 4))
+        else:
+            if sensor.intensity_only:
+                r.intensity = img[..., 0]
+            else:
+                r.stokes = img
+    if "range" in d:
+        r.range = d["range"]
+        r.coverage = d["coverage"]
+    return r
