@@ -87,13 +87,33 @@ def _check_frame(frame: str) -> str:
 def brdf(material: Material, wi: object, wo: object, frame: str = "sp") -> np.ndarray:
     """Mueller BRDF ``f(wi, wo)`` of ``material``, shape ``(..., 4, 4)``, in 1/sr.
 
-    ``wi`` (toward the transmitter) and ``wo`` (toward the receiver) are unit vectors in the
-    local frame (``n = +z``), arrays of shape ``(..., 3)`` that broadcast against each other.
     The cosine factor is not included: the reflected radiance is ``f cos(theta_i)`` times
-    the incident irradiance. Directions must have ``z >= 0`` and unit length within 1e-6
-    (they are renormalized); ``z < 0``, non-finite values or other lengths raise
-    :class:`pprender.Error`. A direction exactly on the horizon (``z == 0``) gives the
-    zero matrix, as in Mitsuba. ``frame`` is ``"sp"`` or ``"mitsuba"`` (module docstring).
+    the incident irradiance.
+
+    Parameters
+    ----------
+    material : Material
+        The material.
+    wi : array_like, shape (..., 3)
+        Directions toward the transmitter in the local frame (``n = +z``): ``z >= 0`` and
+        unit length within 1e-6 (they are renormalized); broadcast against ``wo``.
+    wo : array_like, shape (..., 3)
+        Directions toward the receiver, as ``wi``; broadcast against ``wi``.
+    frame : {"sp", "mitsuba"}, optional
+        Stokes bases of the two beams (module docstring). Default ``"sp"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``(..., 4, 4)`` (the broadcast leading shape of ``wi`` and ``wo``), in 1/sr. A
+        direction exactly on the horizon (``z == 0``) gives the zero matrix, as in Mitsuba.
+
+    Raises
+    ------
+    pprender.Error
+        For directions with ``z < 0``, non-finite values or other lengths; for ``wi`` and
+        ``wo`` shapes that do not broadcast; for a ``frame`` other than ``"sp"`` or
+        ``"mitsuba"``.
     """
     _check_frame(frame)
     a = _directions(wi, "wi")
@@ -113,9 +133,30 @@ def brdf(material: Material, wi: object, wo: object, frame: str = "sp") -> np.nd
 
 
 def specular(material: Material, wi: object, frame: str = "sp") -> np.ndarray:
-    """Dimensionless Mueller reflectance of the flat interface of ``material`` (the mirror
-    limit, roughness ignored) for incidence ``wi`` into ``wo = (-wi.x, -wi.y, wi.z)``,
-    shape ``(..., 4, 4)``."""
+    """Dimensionless Mueller reflectance of the flat interface of ``material`` (the mirror limit).
+
+    Roughness is ignored: incidence ``wi`` reflects into ``wo = (-wi.x, -wi.y, wi.z)``.
+
+    Parameters
+    ----------
+    material : Material
+        The material.
+    wi : array_like, shape (..., 3)
+        Unit vectors toward the transmitter in the local frame (``n = +z``).
+    frame : {"sp", "mitsuba"}, optional
+        Stokes bases of the two beams (module docstring). Default ``"sp"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``(..., 4, 4)``, dimensionless.
+
+    Raises
+    ------
+    pprender.Error
+        For a ``wi`` that is not an array of shape ``(..., 3)``, or a ``frame`` other than
+        ``"sp"`` or ``"mitsuba"``.
+    """
     _check_frame(frame)
     a = _directions(wi, "wi")
     shape = a.shape[:-1]
@@ -123,15 +164,38 @@ def specular(material: Material, wi: object, frame: str = "sp") -> np.ndarray:
 
 
 def albedo(material: Material, wi: object, order: int = 128) -> np.ndarray:
-    """Directional albedo for unpolarized incident light, ``int M00(wi, wo) cos(theta_o) dwo``,
-    shape ``(...)`` for ``wi`` of shape ``(..., 3)``.
+    """Directional albedo for unpolarized incident light, ``int M00(wi, wo) cos(theta_o) dwo``.
 
+    Parameters
+    ----------
+    material : Material
+        The material.
+    wi : array_like, shape (..., 3)
+        Incident directions in the local frame (``n = +z``): unit vectors (``|w| - 1``
+        within 1e-6) with ``z >= 0``.
+    order : int, optional
+        Order of the Gauss-Legendre rule of the single-bounce term, an integer in [8, 4096].
+        Default 128.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``(...)`` for ``wi`` of shape ``(..., 3)``.
+
+    Raises
+    ------
+    pprender.Error
+        For a ``wi`` that is not finite, not made of unit vectors or below the horizon
+        (``z < 0``), or an ``order`` that is not an integer in [8, 4096].
+
+    Notes
+    -----
     The single-bounce term is integrated numerically over the half vector with an
-    ``order x order`` Gauss-Legendre rule (split at the horizon and at the masking
-    switch; see ``src/brdf/albedo.rs``), independently of the per-material tables; the
-    multiple and diffuse terms are integrated analytically. With ``F = 1``
-    (``eta=inf``) and ``terms=("single", "multiple")`` the result is 1 to within the
-    table error (below 1e-5, see ``tests/test_energy.py``).
+    ``order x order`` Gauss-Legendre rule (split at the horizon and at the masking switch;
+    see ``src/brdf/albedo.rs``), independently of the per-material tables; the multiple and
+    diffuse terms are integrated analytically. With ``F = 1`` (``eta=inf``) and
+    ``terms=("single", "multiple")`` the result is 1 to within the table error (below 1e-5,
+    see ``tests/test_energy.py``).
     """
     a = _directions(wi, "wi")
     shape = a.shape[:-1]
@@ -149,8 +213,20 @@ def albedo(material: Material, wi: object, order: int = 128) -> np.ndarray:
 
 
 def white_furnace(distribution: str = "blinn_phong", **kwargs: object) -> Material:
-    """A material with ``F = 1`` (a perfect conductor, ``eta=inf``): the white-furnace
-    test material. Keyword arguments are passed to :class:`Material`."""
+    """The white-furnace test material: ``F = 1`` (a perfect conductor, ``eta=inf``).
+
+    Parameters
+    ----------
+    distribution : str, optional
+        The microfacet distribution, passed to :class:`Material`. Default ``"blinn_phong"``.
+    **kwargs
+        Further keyword arguments, passed to :class:`Material`.
+
+    Returns
+    -------
+    Material
+        ``Material(distribution, eta=complex(inf, 0), **kwargs)``.
+    """
     return Material(distribution, eta=complex(np.inf, 0.0), **kwargs)  # type: ignore[arg-type]
 
 
@@ -158,13 +234,23 @@ def white_furnace(distribution: str = "blinn_phong", **kwargs: object) -> Materi
 class MonostaticTable:
     """The monostatic double-bounce Mueller BRDF of a material against incidence angle.
 
-    ``theta`` (n,) radians (nodes uniform in the material's table coordinate, densest near
-    normal incidence on the lobe's scale), ``mueller`` (n, 4, 4) in 1/sr, sp frame
-    (plane of incidence), coherent backscatter included as configured on the material.
-    The single term at backscatter and the multiple term are closed forms and are not in
-    the table. ``max_error``: largest error of the interpolated table at the midpoints
-    between nodes against the material's own evaluation, relative to the total monostatic
-    M00 there (None if not measured). ``build_seconds``: time to build it.
+    Made by :func:`monostatic_table`. The single term at backscatter and the multiple term
+    are closed forms and are not in the table.
+
+    Attributes
+    ----------
+    theta : numpy.ndarray, shape (n,)
+        Incidence angles in radians: nodes uniform in the material's table coordinate,
+        densest near normal incidence on the lobe's scale.
+    mueller : numpy.ndarray, shape (n, 4, 4)
+        The double-bounce Mueller BRDF in 1/sr, sp frame (plane of incidence), coherent
+        backscatter included as configured on the material.
+    build_seconds : float
+        Time to build the table (s).
+    max_error : float or None
+        Largest error of the interpolated table at the midpoints between nodes against the
+        material's own evaluation, relative to the total monostatic M00 there (None if not
+        measured).
     """
 
     theta: np.ndarray
@@ -176,10 +262,35 @@ class MonostaticTable:
 def monostatic_table(
     material: Material, nodes: int = 64, double_order: int = 48, measure: bool = True
 ) -> MonostaticTable:
-    """Tabulate the monostatic double-bounce BRDF of ``material`` at ``nodes + 1`` angles,
-    with the double-bounce quadrature at ``double_order`` (see :class:`MonostaticTable`).
+    """Tabulate the monostatic double-bounce BRDF of ``material`` at ``nodes + 1`` angles.
+
+    Parameters
+    ----------
+    material : Material
+        The material.
+    nodes : int, optional
+        Number of intervals of the table, in [4, 100000]: ``nodes + 1`` angles. Default 64.
+    double_order : int, optional
+        Order of the double-bounce quadrature, in [4, 1024]. Default 48.
+    measure : bool, optional
+        Measure the table's interpolation error (``MonostaticTable.max_error``; None
+        otherwise). Default True.
+
+    Returns
+    -------
+    MonostaticTable
+        The table (see :class:`MonostaticTable`).
+
+    Raises
+    ------
+    pprender.Error
+        For ``nodes`` or ``double_order`` out of range.
+
+    Notes
+    -----
     Interpolation: ``ln M00`` (bounded by its neighbours) and ``M_ij / M00`` by Catmull-Rom
-    in the table coordinate, as in ``src/brdf/table.rs``."""
+    in the table coordinate, as in ``src/brdf/table.rs``.
+    """
     theta, mueller, secs, err = _core.monostatic_table(material, int(nodes), int(double_order), bool(measure))
     return MonostaticTable(theta=theta, mueller=mueller, build_seconds=secs, max_error=err)
 

@@ -240,12 +240,25 @@ def _index(wavelength: object) -> int:
 def optical_constants(name: str, wavelength: float = 1064e-9) -> complex:
     """Complex refractive index ``eta = n + 1j*k`` (``k >= 0``) of a named material.
 
-    ``wavelength`` is in metres and must be within 1 nm of 532e-9 or 1064e-9. For the
-    paints this is the binder's index (the specular surface); the pigment enters through
-    :func:`diffuse_albedo`. Sources per material: see the module docstring.
+    For the paints this is the binder's index (the specular surface); the pigment enters
+    through :func:`diffuse_albedo`. Sources per material: see the module docstring.
 
-    Raises :class:`pprender.Error` for an unknown ``name`` or an unsupported or
-    non-finite ``wavelength``.
+    Parameters
+    ----------
+    name : str
+        A material name (:data:`NAMES`, or an alias in :data:`ALIASES`).
+    wavelength : float, optional
+        In metres, within 1 nm of 532e-9 or 1064e-9. Default 1064e-9.
+
+    Returns
+    -------
+    complex
+        ``eta``.
+
+    Raises
+    ------
+    pprender.Error
+        For an unknown ``name`` or an unsupported or non-finite ``wavelength``.
     """
     entry = _TABLE[_canonical(name)]
     n, k = entry.nk[_index(wavelength)]
@@ -253,8 +266,28 @@ def optical_constants(name: str, wavelength: float = 1064e-9) -> complex:
 
 
 def diffuse_albedo(name: str, wavelength: float = 1064e-9) -> float:
-    """Lambertian albedo of the body under the specular surface (0 for metals and clear
-    dielectrics). The paint values are engineering estimates (module docstring)."""
+    """Lambertian albedo of the body under the specular surface.
+
+    0 for metals and clear dielectrics. The paint values are engineering estimates (module
+    docstring).
+
+    Parameters
+    ----------
+    name : str
+        A material name (:data:`NAMES`, or an alias in :data:`ALIASES`).
+    wavelength : float, optional
+        In metres, within 1 nm of 532e-9 or 1064e-9. Default 1064e-9.
+
+    Returns
+    -------
+    float
+        The albedo ``rho_d``.
+
+    Raises
+    ------
+    pprender.Error
+        For an unknown ``name`` or an unsupported ``wavelength``.
+    """
     entry = _TABLE[_canonical(name)]
     return float(entry.albedo[_index(wavelength)])
 
@@ -264,11 +297,29 @@ def material_kwargs(name: str, wavelength: float = 1064e-9, **kwargs: Any) -> Di
 
     Starts from ``eta``, ``diffuse_albedo``, ``name`` (canonical, so "aluminum" gives
     "aluminium"), ``wavelength`` (the one given, which the constants are for) and the
-    material's default roughness, then applies ``kwargs`` (which
-    win; ``name`` itself cannot be overridden here). A caller's ``m`` replaces
-    the default ``alpha`` and vice versa. Unless the caller gives ``terms``, they are
-    ``("single", "multiple", "diffuse")`` when the resulting ``diffuse_albedo`` is
-    positive and ``("single", "multiple")`` otherwise.
+    material's default roughness, then applies ``kwargs`` (which win; ``name`` itself cannot
+    be overridden here). A caller's ``m`` replaces the default ``alpha`` and vice versa.
+    Unless the caller gives ``terms``, they are ``("single", "multiple", "diffuse")`` when the
+    resulting ``diffuse_albedo`` is positive and ``("single", "multiple")`` otherwise.
+
+    Parameters
+    ----------
+    name : str
+        A material name (:data:`NAMES`, or an alias in :data:`ALIASES`).
+    wavelength : float, optional
+        In metres, within 1 nm of 532e-9 or 1064e-9. Default 1064e-9.
+    **kwargs
+        Overrides of the keyword arguments.
+
+    Returns
+    -------
+    dict
+        Keyword arguments of ``pprender.Material``.
+
+    Raises
+    ------
+    pprender.Error
+        For an unknown ``name`` or an unsupported ``wavelength``.
     """
     key = _canonical(name)
     i = _index(wavelength)
@@ -302,6 +353,25 @@ def get(name: str, wavelength: float = 1064e-9, **kwargs: Any) -> Any:
     :func:`diffuse_albedo`; the default roughness (module docstring) and ``terms`` are
     overridden by ``kwargs`` (see :func:`material_kwargs`), e.g.
     ``get("gold", 532e-9, alpha=0.2)`` or ``get("white_paint", distribution="beckmann")``.
+
+    Parameters
+    ----------
+    name : str
+        A material name (:data:`NAMES`, or an alias in :data:`ALIASES`).
+    wavelength : float, optional
+        In metres, within 1 nm of 532e-9 or 1064e-9. Default 1064e-9.
+    **kwargs
+        Keyword arguments of ``pprender.Material`` overriding the defaults.
+
+    Returns
+    -------
+    pprender.Material
+        The material, named and labelled with ``wavelength``.
+
+    Raises
+    ------
+    pprender.Error
+        For an unknown ``name`` or an unsupported ``wavelength``.
     """
     from pprender import Material  # lazy: Material is optional at import time
 

@@ -95,16 +95,38 @@ _MILLIMETRES = {"mm", "millimeter", "millimeters", "millimetre", "millimetres"}
 
 
 class UnitsWarning(UserWarning):
-    """The mesh does not look like it is in metres (too large, or trimesh says other units)."""
+    """The mesh does not look like it is in metres (too large, or trimesh says other units).
+
+    Emitted by :func:`flatten` (with ``check=True``) for a mesh more than :data:`MAX_EXTENT`
+    across or whose trimesh ``units`` are not metres.
+    """
 
 
 class SkippedGeometryWarning(UserWarning):
-    """A trimesh.Scene node whose geometry is not a triangle mesh was left out."""
+    """A trimesh.Scene node whose geometry is not a triangle mesh was left out.
+
+    Emitted by :func:`flatten` for ``Path3D`` lines, ``PointCloud`` or geometries without
+    faces (module docstring).
+    """
 
 
 @dataclass(frozen=True, eq=False)
 class Node:
-    """One node (instance) of a flattened trimesh.Scene."""
+    """One node (instance) of a flattened trimesh.Scene.
+
+    Parameters
+    ----------
+    name : str
+        The node's name.
+    geometry : str
+        The name of its geometry (a key of ``scene.geometry``).
+    material : str or None
+        ``geometry.visual.material.name`` (None when the geometry has no named material).
+    transform : numpy.ndarray
+        (4, 4) the node's transform to the scene's base frame (the body frame).
+    faces : slice
+        Its faces in the flattened mesh.
+    """
 
     name: str
     geometry: str
@@ -118,7 +140,27 @@ class Node:
 
 @dataclass(eq=False)
 class FlatMesh:
-    """A mesh as pprender takes it (:func:`flatten`)."""
+    """A mesh as pprender takes it (:func:`flatten`).
+
+    Parameters
+    ----------
+    vertices : numpy.ndarray
+        (V, 3) float64, m, body frame.
+    faces : numpy.ndarray
+        (F, 3) int64.
+    normals : numpy.ndarray or None
+        (V, 3) vertex normals (trimesh input and ``normals=True``).
+    face_part : numpy.ndarray or None
+        (F,) int64 each face's index into ``parts`` (None: a mesh without parts).
+    parts : list of str or None
+        Part names: a model's ``metadata["pprender_parts"]``, or a trimesh.Scene's node names.
+    nodes : list of Node or None, optional
+        A trimesh.Scene's nodes, in ``parts`` order (None for other meshes).
+    skipped : list of tuple, optional
+        ``(node, geometry, type)`` of the trimesh.Scene nodes left out (not triangle meshes).
+    metadata : dict, optional
+        The mesh's (or scene's) trimesh metadata.
+    """
 
     vertices: np.ndarray  # (V, 3) float64, m, body frame
     faces: np.ndarray  # (F, 3) int64
@@ -135,9 +177,18 @@ class FlatMesh:
 
 
 class Match(NamedTuple):
-    """How a part got its material: the ``materials`` key, what it named (``"node"``,
-    ``"geometry"``, ``"material"`` for a trimesh.Scene; ``"part"`` for a model's parts)
-    and the material."""
+    """How a part got its material.
+
+    Parameters
+    ----------
+    key : str
+        The ``materials`` key.
+    by : str
+        What it named: ``"node"``, ``"geometry"``, ``"material"`` for a trimesh.Scene;
+        ``"part"`` for a model's parts.
+    material : Material
+        The material.
+    """
 
     key: str
     by: str
@@ -146,7 +197,19 @@ class Match(NamedTuple):
 
 @dataclass(eq=False)
 class Assignment:
-    """Materials resolved for a mesh (:func:`assign_materials`)."""
+    """Materials resolved for a mesh (:func:`assign_materials`).
+
+    Parameters
+    ----------
+    materials : list of Material
+        In material-index order.
+    parts : list of str or None
+        Names of ``materials`` (None: no named parts).
+    face_material : numpy.ndarray
+        (F,) int64 indices into ``materials``.
+    matched : dict of str to Match, or None
+        Part -> :class:`Match`, for a mapping.
+    """
 
     materials: list[Material]  # in material-index order
     parts: list[str] | None  # names of ``materials`` (None: no named parts)
@@ -256,13 +319,39 @@ def _flatten_scene(scene: Any, normals: bool) -> FlatMesh:
 
 
 def flatten(mesh: Any, *, normals: bool = True, check: bool = True) -> FlatMesh:
-    """The mesh as pprender takes it: vertices (m, body frame), faces, vertex normals and
-    the per-face part index (module docstring: which inputs, in which order).
+    """The mesh as pprender takes it: vertices, faces, vertex normals and per-face part index.
 
-    ``normals``: compute vertex normals (trimesh inputs; for ``smooth=True``).
-    ``check``: validate (a non-empty mesh, finite vertices, face indices in range; else
-    :class:`pprender.Error` naming ``mesh``, ``vertices`` or ``faces``) and warn about
-    units (:class:`UnitsWarning`).
+    Vertices are in metres in the body frame; the module docstring says which inputs are
+    taken, and in which order.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh, trimesh.Scene or (vertices, faces)
+        The mesh (module docstring).
+    normals : bool, optional
+        Compute vertex normals (trimesh inputs; for ``smooth=True``). Default True.
+    check : bool, optional
+        Validate (a non-empty mesh, finite vertices, face indices in range) and warn about
+        units. Default True.
+
+    Returns
+    -------
+    FlatMesh
+        The flattened mesh.
+
+    Raises
+    ------
+    pprender.Error
+        For an input of another type, a ``trimesh.Scene`` without triangle geometry, or
+        arrays of the wrong shape; with ``check``, for an empty mesh, non-finite vertices or
+        face indices out of range (naming ``mesh``, ``vertices`` or ``faces``).
+
+    Warns
+    -----
+    UnitsWarning
+        With ``check``, for a mesh that does not look like it is in metres.
+    SkippedGeometryWarning
+        For ``trimesh.Scene`` nodes that are not triangle meshes.
     """
     import trimesh
 
@@ -344,12 +433,36 @@ def assign_materials(
     face_material: Any = None,
     resolve: Callable[[Any], Material] | None = None,
 ) -> Assignment:
-    """Resolve :class:`pprender.Scene`'s ``materials`` (and ``face_material``) for a
-    flattened mesh (module docstring: the forms and the name precedence).
+    """Resolve :class:`pprender.Scene`'s ``materials`` (and ``face_material``) for a flattened mesh.
 
-    ``resolve`` turns a material name into a :class:`pprender.Material` (default: the
-    Material itself only). ``face_material``, when given, overrides the per-face index
-    (indices into the returned material list).
+    The module docstring gives the forms and the name precedence.
+
+    Parameters
+    ----------
+    flat : FlatMesh
+        The flattened mesh (:func:`flatten`).
+    materials : Material, str, sequence or mapping
+        One material, a list, or a mapping from name to material (module docstring).
+    face_material : array_like, optional
+        (F,) integer indices into the returned material list; when given, it overrides the
+        per-face index.
+    resolve : callable, optional
+        Turns a material name into a :class:`pprender.Material` (default: the Material itself
+        only).
+
+    Returns
+    -------
+    Assignment
+        The materials, their part names, each face's material index and, for a mapping, which
+        key matched each part.
+
+    Raises
+    ------
+    pprender.Error
+        For a mapping whose keys name nothing or leave a node or part without a material
+        (naming ``materials`` and listing the names there are), a list too short for the
+        mesh's parts, a ``face_material`` that is not (F,) integers, or a material name
+        without ``resolve``.
     """
     cache: dict[Any, Material] = {}
 

@@ -186,42 +186,56 @@ def cubesat(
 ) -> trimesh.Trimesh:
     """A CubeSat: bus box, optional solar panels and a whip antenna.
 
-    ``units``: ``"1U"`` (bus 0.1 x 0.1 x 0.1135 m), ``"3U"`` (0.1 x 0.1 x 0.3405 m) or
-    ``"6U"`` (0.2263 x 0.1 x 0.366 m), extents along (x, y, z) (:data:`BUS_EXTENTS`).
-    The bus is centred on the origin with its long axis along +z.
+    The bus is centred on the origin with its long axis along +z. Parts, in this order when
+    present: ``"bus"`` or ``"blanket"``, ``"solar_cells"``, ``"panel_back"``, ``"antenna"``.
 
-    ``panels``:
+    Parameters
+    ----------
+    units : {"1U", "3U", "6U"}, optional
+        ``"1U"`` (bus 0.1 x 0.1 x 0.1135 m), ``"3U"`` (0.1 x 0.1 x 0.3405 m, the default) or
+        ``"6U"`` (0.2263 x 0.1 x 0.366 m), extents along (x, y, z) (:data:`BUS_EXTENTS`).
+    panels : {"deployed", "body", None}, optional
+        Panel parts: ``"solar_cells"`` (the cell side) and ``"panel_back"`` (the back side
+        and the 2 mm edges).
 
-    * ``"deployed"``: two wings, each the size of the bus's +y face (bus x extent by bus z
-      extent), 2 mm thick, hinged at the two edges ``x = +-X/2, y = +Y/2`` of the bus and
-      extending outward in x (the +x wing spans ``x in [X/2, 3X/2]``). The cells face +y and
-      are flush with the bus's +y face (wing ``y in [Y/2 - 2 mm, Y/2]``).
-    * ``"body"``: a 2 mm panel on each of the four long faces (+-x, +-y), inset by 5 mm
-      from the face's edges, cells facing outward (the panels lie outside the bus box).
-    * ``None``: no panels.
+        * ``"deployed"`` (default): two wings, each the size of the bus's +y face (bus x
+          extent by bus z extent), 2 mm thick, hinged at the two edges ``x = +-X/2, y = +Y/2``
+          of the bus and extending outward in x (the +x wing spans ``x in [X/2, 3X/2]``). The
+          cells face +y and are flush with the bus's +y face (wing ``y in [Y/2 - 2 mm, Y/2]``).
+        * ``"body"``: a 2 mm panel on each of the four long faces (+-x, +-y), inset by 5 mm
+          from the face's edges, cells facing outward (the panels lie outside the bus box).
+        * ``None``: no panels.
+    antenna : bool, optional
+        A whip, a cylinder of 3 mm diameter and 0.2 m length with 16 sides (part
+        ``"antenna"``), along -z from the centre of the bus's -z face
+        (``z in [-Z/2 - 0.2, -Z/2]``). Default True.
+    wrap : bool, optional
+        Replace the bus by a wrinkled thermal blanket (part ``"blanket"`` instead of
+        ``"bus"``): the bus box subdivided one level more than ``detail`` and every vertex
+        displaced along its normal by smooth random noise (wavelengths 4-12 cm), the largest
+        displacement being ``wrap_amplitude``. Default False.
+    detail : int, optional
+        Tessellation level, an integer in [0, 7]. The bus box has ``12 * 4**detail``
+        triangles (``12 * 4**(detail + 1)`` when wrapped); each panel is subdivided one level
+        more, ``4 * 4**(detail + 1) + 8 * 2**(detail + 1)`` triangles; the antenna has 64.
+        With the defaults (3U, deployed panels, antenna, ``detail=4``) that is
+        3072 + 2 * 4352 + 64 = 11,840 triangles (the ~10k-triangle benchmark CubeSat);
+        ``detail=3`` gives 3,136 and ``detail=5`` 46,144.
+    seed : int, optional
+        Seed of the blanket's noise, drawn from ``numpy.random.default_rng(seed)``: the same
+        seed gives the same mesh. Default 0.
+    wrap_amplitude : float, optional
+        Largest displacement of the blanket (m), in (0, 0.01]. Default 0.0015 (1.5 mm).
 
-    Panel parts: ``"solar_cells"`` (the cell side) and ``"panel_back"`` (the back side and
-    the 2 mm edges).
+    Returns
+    -------
+    trimesh.Trimesh
+        The mesh, with its parts in ``metadata`` (module docstring).
 
-    ``antenna``: a whip, a cylinder of 3 mm diameter and 0.2 m length with 16 sides
-    (part ``"antenna"``), along -z from the centre of the bus's -z face
-    (``z in [-Z/2 - 0.2, -Z/2]``).
-
-    ``wrap``: replace the bus by a wrinkled thermal blanket (part ``"blanket"`` instead of
-    ``"bus"``): the bus box subdivided one level more than ``detail`` and every vertex
-    displaced along its normal by smooth random noise (wavelengths 4-12 cm), the largest
-    displacement being ``wrap_amplitude`` (m, in (0, 0.01], default 1.5 mm). The noise is
-    drawn from ``numpy.random.default_rng(seed)``: the same seed gives the same mesh.
-
-    ``detail`` (integer in [0, 7]): tessellation level. The bus box has ``12 * 4**detail``
-    triangles (``12 * 4**(detail + 1)`` when wrapped); each panel is subdivided one level
-    more, ``4 * 4**(detail + 1) + 8 * 2**(detail + 1)`` triangles; the antenna has 64.
-    With the defaults (3U, deployed panels, antenna, ``detail=4``) that is
-    3072 + 2 * 4352 + 64 = 11,840 triangles (the ~10k-triangle benchmark CubeSat);
-    ``detail=3`` gives 3,136 and ``detail=5`` 46,144.
-
-    Parts, in this order when present: ``"bus"`` or ``"blanket"``, ``"solar_cells"``,
-    ``"panel_back"``, ``"antenna"``. Bad arguments raise :class:`pprender.Error`.
+    Raises
+    ------
+    pprender.Error
+        For bad arguments.
     """
     if not isinstance(units, str) or units.upper() not in BUS_EXTENTS:
         raise Error(f"invalid units = {units!r}: must be one of {', '.join(map(repr, BUS_EXTENTS))}")
@@ -273,10 +287,28 @@ def cubesat(
 
 
 def sphere(radius: float = 0.5, subdivisions: int = 4) -> trimesh.Trimesh:
-    """An icosphere of ``radius`` (m) centred on the origin, ``20 * 4**subdivisions``
-    triangles (``subdivisions`` in [0, 7]; default 4: 5,120 triangles). Its vertices lie on
-    the sphere, so its area is slightly below ``4 pi r**2`` (by 0.12 % at the default).
-    One part, ``"surface"``."""
+    """An icosphere of ``radius`` (m) centred on the origin.
+
+    Its vertices lie on the sphere, so its area is slightly below ``4 pi r**2`` (by 0.12 % at
+    the default). One part, ``"surface"``.
+
+    Parameters
+    ----------
+    radius : float, optional
+        Radius (m), > 0. Default 0.5.
+    subdivisions : int, optional
+        Integer in [0, 7]: ``20 * 4**subdivisions`` triangles (default 4: 5,120 triangles).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        The mesh, with its parts in ``metadata`` (module docstring).
+
+    Raises
+    ------
+    pprender.Error
+        For bad arguments.
+    """
     r = _positive("radius", radius)
     n = _integer("subdivisions", subdivisions, 0, _MAX_DETAIL)
     mesh = trimesh.creation.icosphere(subdivisions=n, radius=r)
@@ -284,12 +316,33 @@ def sphere(radius: float = 0.5, subdivisions: int = 4) -> trimesh.Trimesh:
 
 
 def plate(width: float = 1.0, height: float = 1.0, thickness: float = 0.002, detail: int = 0) -> trimesh.Trimesh:
-    """A flat plate: a thin closed box, ``width`` (x) by ``height`` (y) by ``thickness``
-    (z), in metres, centred on the origin, the front facing +z.
+    """A flat plate: a thin closed box centred on the origin, the front facing +z.
 
     Parts: ``"front"`` (the +z side, ``z = thickness / 2``), ``"back"`` (the -z side) and
-    ``"edge"`` (the four thin sides). ``detail`` (integer in [0, 8]) subdivisions of the
-    rectangle: ``4 * 4**detail + 8 * 2**detail`` triangles (default 0: 12 triangles)."""
+    ``"edge"`` (the four thin sides).
+
+    Parameters
+    ----------
+    width : float, optional
+        Size along x (m). Default 1.
+    height : float, optional
+        Size along y (m). Default 1.
+    thickness : float, optional
+        Size along z (m). Default 0.002.
+    detail : int, optional
+        Integer in [0, 8]: subdivisions of the rectangle, ``4 * 4**detail + 8 * 2**detail``
+        triangles (default 0: 12 triangles).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        The mesh, with its parts in ``metadata`` (module docstring).
+
+    Raises
+    ------
+    pprender.Error
+        For bad arguments.
+    """
     w = _positive("width", width)
     h = _positive("height", height)
     t = _positive("thickness", thickness)
@@ -299,14 +352,33 @@ def plate(width: float = 1.0, height: float = 1.0, thickness: float = 0.002, det
 
 
 def cone(radius: float = 0.5, height: float = 1.0, sections: int = 64) -> trimesh.Trimesh:
-    """A right circular cone of base ``radius`` and ``height`` (m), axis +z, apex at
-    ``z = +height / 2`` and base at ``z = -height / 2``. The base circle is a regular
-    polygon of ``sections`` sides (integer in [3, 100000]; default 64) inscribed in it;
-    ``2 * sections`` triangles. Parts: ``"side"`` and ``"base"``.
+    """A right circular cone, axis +z, apex at ``z = +height / 2`` and base at ``z = -height / 2``.
 
-    The lateral area of the polygonal cone is ``n r sin(pi/n) sqrt(h**2 + r**2
-    cos(pi/n)**2)`` (``n = sections``), which falls below ``pi r sqrt(r**2 + h**2)`` by a
-    relative amount of at most ``(2/3) (pi/n)**2`` (0.16 % at the default)."""
+    The base circle is a regular polygon of ``sections`` sides inscribed in it;
+    ``2 * sections`` triangles. Parts: ``"side"`` and ``"base"``. The lateral area of the
+    polygonal cone is ``n r sin(pi/n) sqrt(h**2 + r**2 cos(pi/n)**2)`` (``n = sections``),
+    which falls below ``pi r sqrt(r**2 + h**2)`` by a relative amount of at most
+    ``(2/3) (pi/n)**2`` (0.16 % at the default).
+
+    Parameters
+    ----------
+    radius : float, optional
+        Base radius (m). Default 0.5.
+    height : float, optional
+        Height (m). Default 1.
+    sections : int, optional
+        Sides of the base polygon, an integer in [3, 100000]. Default 64.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        The mesh, with its parts in ``metadata`` (module docstring).
+
+    Raises
+    ------
+    pprender.Error
+        For bad arguments.
+    """
     r = _positive("radius", radius)
     h = _positive("height", height)
     n = _integer("sections", sections, 3, 100_000)
@@ -321,8 +393,21 @@ def cone(radius: float = 0.5, height: float = 1.0, sections: int = 64) -> trimes
 
 
 def describe(mesh: trimesh.Trimesh) -> str:
-    """One line per part of a model from this module: triangle count and area (m^2),
-    followed by the totals and the bounding box."""
+    """One line per part of a model from this module: triangle count and area (m^2).
+
+    The lines are followed by the totals and the bounding box.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        A mesh from this module (with ``metadata["pprender_parts"]`` and
+        ``metadata["pprender_material"]``).
+
+    Returns
+    -------
+    str
+        The description.
+    """
     parts: list[str] = mesh.metadata["pprender_parts"]
     material = np.asarray(mesh.metadata["pprender_material"])
     area = mesh.area_faces

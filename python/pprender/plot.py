@@ -93,10 +93,38 @@ def _image(fig: Any, ax: Any, data: np.ndarray, extent: float, title: str, cmap:
 def stokes_images(result: RenderResult, index: int = 0, input_state: Sequence[float] = _H, *,
                   normalized: bool = True, log_intensity: bool = True,
                   figsize: tuple[float, float] = (11.0, 9.0)) -> Any:
-    """Four Stokes images ``I`` (m^2 per pixel; logarithmic colours over 6 decades when
-    ``log_intensity``, as glints outshine the rest) and ``Q, U, V`` (divided by ``I`` when
-    ``normalized``, in [-1, 1]) of attitude ``index`` of a render with ``"mueller"`` or
-    ``"stokes"`` output. 2 x 2 image axes, each with a colorbar (8 axes)."""
+    """Four Stokes images ``I, Q, U, V`` of one attitude of a render.
+
+    2 x 2 image axes, each with a colorbar (8 axes).
+
+    Parameters
+    ----------
+    result : RenderResult
+        A render with ``"mueller"`` or ``"stokes"`` output.
+    index : int, optional
+        The attitude. Default 0.
+    input_state : sequence of float, optional
+        Transmitted Stokes state (4,) in the transmit basis, for a Mueller render (default H,
+        ``(1, 1, 0, 0)``; module docstring).
+    normalized : bool, optional
+        Show ``Q, U, V`` divided by ``I``, in [-1, 1] (default True); else in m^2 per pixel.
+    log_intensity : bool, optional
+        ``I`` (m^2 per pixel) in logarithmic colours over 6 decades (default True), as glints
+        outshine the rest.
+    figsize : tuple of float, optional
+        Figure size (inches). Default (11, 9).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Raises
+    ------
+    pprender.Error
+        For a result without images, an ``index`` out of range or a non-physical
+        ``input_state``.
+    """
     s, _, extent = _stokes_image(result, index, input_state)
     i = s[..., 0]
     seen = i > 0
@@ -118,11 +146,36 @@ def stokes_images(result: RenderResult, index: int = 0, input_state: Sequence[fl
 
 def polarization_images(result: RenderResult, index: int = 0, input_state: Sequence[float] = _H, *,
                         figsize: tuple[float, float] | None = None) -> Any:
-    """Degree of polarization ``DoP``, linear ``DoLP`` and circular ``DoCP`` of the
-    returned light (:func:`pprender.polarimetry.dop` etc.) and, for a Mueller render, the
+    """Degree of polarization ``DoP``, linear ``DoLP`` and circular ``DoCP`` of the returned light.
+
+    Computed by :func:`pprender.polarimetry.dop` etc. and, for a Mueller render, with the
     Gil-Bernabeu depolarization index of each pixel's Mueller matrix
     (:func:`pprender.polarimetry.depolarization_index`; 1 non-depolarizing, 0 an ideal
-    depolarizer). One row of 3 (Stokes) or 4 (Mueller) image axes with colorbars."""
+    depolarizer). One row of 3 (Stokes) or 4 (Mueller) image axes with colorbars.
+
+    Parameters
+    ----------
+    result : RenderResult
+        A render with ``"mueller"`` or ``"stokes"`` output.
+    index : int, optional
+        The attitude. Default 0.
+    input_state : sequence of float, optional
+        Transmitted Stokes state (4,) in the transmit basis, for a Mueller render (default H,
+        ``(1, 1, 0, 0)``; module docstring).
+    figsize : tuple of float, optional
+        Figure size (inches); default 4.2 by 3.8 per image.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Raises
+    ------
+    pprender.Error
+        For a result without images, an ``index`` out of range or a non-physical
+        ``input_state``.
+    """
     s, m, extent = _stokes_image(result, index, input_state)
     seen = s[..., 0] > 0
     panels = [
@@ -144,16 +197,37 @@ def profile(data: Any, *, bin_edges: Any = None, index: int = 0, input_state: Se
             instrument: Any = None, ax: Any = None, log: bool = False) -> Any:
     """Range profile with its polarization channels, on one axes.
 
-    ``data``:
+    Parameters
+    ----------
+    data : Measurement, RenderResult or array_like
+        * a :class:`pprender.instrument.Measurement`: recorded counts per channel (steps) and
+          their expectation (lines) against range;
+        * a :class:`RenderResult` with a profile, or an array ``(..., B, 4, 4)`` Mueller /
+          ``(..., B, 4)`` Stokes with ``bin_edges``: the Stokes components ``I, Q, U, V``
+          (m^2 per bin; from a Mueller profile for ``input_state``), or, with an
+          ``instrument``, the cross-section seen by each of its channels.
+    bin_edges : array_like, optional
+        (B + 1,) range bin edges (m) of an array ``data``.
+    index : int, optional
+        Selects the attitude (leading axis) if there is one. Default 0.
+    input_state : sequence of float, optional
+        Transmitted Stokes state (4,) for a Mueller profile (default H, ``(1, 1, 0, 0)``).
+    instrument : Instrument, optional
+        Show the cross-section seen by each of its channels instead of ``I, Q, U, V``.
+    ax : matplotlib.axes.Axes, optional
+        Draw into this axes (and its figure).
+    log : bool, optional
+        Log y axis. Default False.
 
-    * a :class:`pprender.instrument.Measurement`: recorded counts per channel (steps) and
-      their expectation (lines) against range;
-    * a :class:`RenderResult` with a profile, or an array ``(..., B, 4, 4)`` Mueller /
-      ``(..., B, 4)`` Stokes with ``bin_edges``: the Stokes components ``I, Q, U, V``
-      (m^2 per bin; from a Mueller profile for ``input_state``), or, with an
-      ``instrument``, the cross-section seen by each of its channels.
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
 
-    ``index`` selects the attitude (leading axis) if there is one. ``log``: log y axis.
+    Raises
+    ------
+    pprender.Error
+        For invalid data, ``index``, ``instrument`` or ``input_state``.
     """
     from .inverse.instrument import Instrument, Measurement, _channel_cross_sections, _profile_and_edges
 
@@ -202,10 +276,35 @@ def profile(data: Any, *, bin_edges: Any = None, index: int = 0, input_state: Se
 
 def confusion_matrix(matrix: Any, labels: Sequence[str], *, normalize: bool = True, ax: Any = None,
                      cmap: str = "Blues") -> Any:
-    """A confusion matrix: ``matrix[i, j]`` counts cases of true class ``i`` classified as
-    ``j`` (rows true, columns predicted). Colours are row fractions when ``normalize``
-    (each true class sums to 1), else counts; each cell is annotated with its count. One
-    axes and a colorbar."""
+    """A confusion matrix: ``matrix[i, j]`` counts cases of true class ``i`` classified as ``j``.
+
+    Rows are true, columns predicted; each cell is annotated with its count. One axes and a
+    colorbar.
+
+    Parameters
+    ----------
+    matrix : array_like
+        (K, K) counts, finite and >= 0.
+    labels : sequence of str
+        (K,) class names.
+    normalize : bool, optional
+        Colours are row fractions (each true class sums to 1) when True (default), else
+        counts.
+    ax : matplotlib.axes.Axes, optional
+        Draw into this axes (and its figure).
+    cmap : str, optional
+        Colour map. Default ``"Blues"``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Raises
+    ------
+    pprender.Error
+        For a matrix that is not square counts, or a wrong number of labels.
+    """
     try:
         m = np.asarray(matrix, dtype=np.float64)
     except (TypeError, ValueError):
@@ -242,9 +341,31 @@ def confusion_matrix(matrix: Any, labels: Sequence[str], *, normalize: bool = Tr
 
 
 def attitude_errors(errors: Any, *, bins: int = 30, degrees: bool = True, ax: Any = None) -> Any:
-    """Histogram of attitude errors (angles in radians, >= 0, e.g. from
-    :func:`pprender.fit.attitude_error`), shown in degrees (``degrees=True``) or radians,
-    with the median and 90th percentile marked. One axes."""
+    """Histogram of attitude errors, with the median and 90th percentile marked.
+
+    One axes.
+
+    Parameters
+    ----------
+    errors : array_like
+        Angles in radians, in [0, pi], e.g. from :func:`pprender.fit.attitude_error`.
+    bins : int, optional
+        Histogram bins. Default 30.
+    degrees : bool, optional
+        Show degrees (default True) or radians.
+    ax : matplotlib.axes.Axes, optional
+        Draw into this axes (and its figure).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Raises
+    ------
+    pprender.Error
+        For an empty array, or values that are not angles in [0, pi].
+    """
     try:
         e = np.asarray(errors, dtype=np.float64).ravel()
     except (TypeError, ValueError):
@@ -269,10 +390,32 @@ def attitude_errors(errors: Any, *, bins: int = 30, degrees: bool = True, ax: An
 
 
 def corner(samples: Any, names: Sequence[str] | None = None, truths: Any = None, **kwargs: Any) -> Any:
-    """Corner plot of posterior samples (the ``corner`` package): ``samples`` (n, p), e.g.
-    ``sampler.get_chain(discard=..., flat=True)``; ``names`` (p,) axis labels (e.g.
-    ``model.names``); ``truths`` (p,) reference values. Quantiles 16/50/84 % are marked and
-    titled. Further keyword arguments go to ``corner.corner``. A p x p grid of axes."""
+    """Corner plot of posterior samples (the ``corner`` package).
+
+    Quantiles 16/50/84 % are marked and titled. A p x p grid of axes.
+
+    Parameters
+    ----------
+    samples : array_like
+        (n, p) samples, n >= 2, e.g. ``sampler.get_chain(discard=..., flat=True)``.
+    names : sequence of str, optional
+        (p,) axis labels (e.g. ``model.names``).
+    truths : array_like, optional
+        (p,) reference values.
+    **kwargs
+        Further keyword arguments, passed to ``corner.corner``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Raises
+    ------
+    pprender.Error
+        For samples that are not finite (n, p) numbers with n >= 2, or ``names`` or
+        ``truths`` of the wrong length.
+    """
     import corner as _corner
 
     try:

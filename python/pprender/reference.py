@@ -100,33 +100,45 @@ def microsurface(
 
     Parameters
     ----------
-    wi : (3,) unit vector toward the transmitter, ``z > 0``.
-    wo : (..., 3) detector directions (unit, ``z > sin(cone)``), all tallied from the
-        same rays.
-    alpha, m : Beckmann roughness, or the Blinn-Phong exponent (``alpha = sqrt(2/(m+2))``);
+    wi : array_like, shape (3,)
+        Unit vector toward the transmitter, ``z > 0``.
+    wo : array_like, shape (..., 3)
+        Detector directions (unit, ``z > sin(cone)``), all tallied from the same rays.
+    alpha, m : float, optional
+        Beckmann roughness, or the Blinn-Phong exponent (``alpha = sqrt(2/(m+2))``);
         exactly one unless ``heights`` is given. ``alpha`` in [1e-8, 4].
-    eta : complex index ``n + ik`` of the surface; ``complex(inf, 0)`` is a perfect
-        conductor (``rs = -1, rp = 1``).
-    rays : total number of primary rays (all batches together).
-    grid : tile size in grid cells (16 to 4096); correlation_length : height correlation
-        length in grid units, in [2, grid/4] (``C(r) ~ exp(-r**2 / l**2)``; the tile holds
-        ``grid / l`` correlation lengths per side).
-    cone : detector half-angle in radians, (0, pi/4].
-    max_order : maximum number of reflections followed (1 to 1000); power still on the
-        surface after it is reported as ``truncated``.
-    frame : ``"sp"`` or ``"mitsuba"`` (see :mod:`pprender`).
-    seed : non-negative integer; batch ``b`` traces the surface
-        ``height_field(..., seed=seed, batch=b)`` with its own rays.
-    batches : number of independent batches (>= 2), each with its own surface
-        realization; standard errors are those of the mean of the batch estimates.
-    heights : optional ``(n, n)`` array of heights (``heights[i, j]`` at ``x = i, y = j``,
-        grid units, periodic) traced instead of random surfaces (then give no
-        roughness; every batch uses this surface).
+    eta : complex, optional
+        Complex index ``n + ik`` of the surface; ``complex(inf, 0)`` is a perfect conductor
+        (``rs = -1, rp = 1``). Default 1.5.
+    rays : int, optional
+        Total number of primary rays (all batches together). Default 100000.
+    grid : int, optional
+        Tile size in grid cells (16 to 4096). Default 256.
+    correlation_length : float, optional
+        Height correlation length in grid units, in [2, grid/4] (``C(r) ~ exp(-r**2 / l**2)``;
+        the tile holds ``grid / l`` correlation lengths per side). Default 8.
+    cone : float, optional
+        Detector half-angle in radians, (0, pi/4]. Default 0.05.
+    max_order : int, optional
+        Maximum number of reflections followed (1 to 1000); power still on the surface after
+        it is reported as ``truncated``. Default 10.
+    frame : {"sp", "mitsuba"}, optional
+        Stokes bases (see :mod:`pprender`). Default ``"sp"``.
+    seed : int, optional
+        Non-negative integer; batch ``b`` traces the surface
+        ``height_field(..., seed=seed, batch=b)`` with its own rays. Default 0.
+    batches : int, optional
+        Number of independent batches (>= 2), each with its own surface realization;
+        standard errors are those of the mean of the batch estimates. Default 10.
+    heights : array_like, optional
+        ``(n, n)`` array of heights (``heights[i, j]`` at ``x = i, y = j``, grid units,
+        periodic) traced instead of random surfaces (then give no roughness; every batch uses
+        this surface).
 
     Returns
     -------
-    dict with
-        ``mueller``: ``(3, ..., 4, 4)`` Mueller BRDF in 1/sr for orders ``ORDERS = (1, 2,
+    dict
+        With ``mueller``: ``(3, ..., 4, 4)`` Mueller BRDF in 1/sr for orders ``ORDERS = (1, 2,
         "3+")`` and the leading shape of ``wo``; ``stderr``: its standard errors;
         ``counts``: ``(3, ...)`` rays tallied; ``projected_solid_angle``: ``(...)``
         ``pi sin(cone)**2 cos(theta_o)``;
@@ -141,7 +153,10 @@ def microsurface(
         ``alpha``, ``eta``, ``rays``, ``grid``, ``correlation_length``, ``cone``,
         ``max_order``, ``frame``, ``seed``, ``batches``).
 
-    Raises :class:`pprender.Error` (a ``ValueError``) naming the bad parameter.
+    Raises
+    ------
+    pprender.Error
+        For an invalid argument (it is a ``ValueError``), naming the bad parameter.
     """
     if frame not in ("sp", "mitsuba"):
         raise Error(f'invalid frame = {frame!r}: expected "sp" or "mitsuba"')
@@ -226,13 +241,36 @@ def height_field(
 ) -> Dict[str, Any]:
     """The random surface that batch ``batch`` of :func:`microsurface` traces.
 
-    Returns a dict with ``heights`` ``(grid, grid)`` (``heights[i, j]`` at ``x = i, y = j``,
-    grid units), ``slopes`` ``(2 grid**2, 2)``: the slopes ``(dz/dx, dz/dy)`` of the
-    triangles (each of projected area 1/2; cell ``(i, j)`` gives rows ``2 (i grid + j)``
-    and ``+1``), ``realized_alpha`` (``sqrt(mean(sx**2 + sy**2))``, equal to ``alpha``),
-    ``slope_cov`` ``(2, 2)``, ``alpha_unscaled_ratio`` and ``height_scale``.
     Cell ``(i, j)`` is split along its main diagonal when ``i + j`` is even, along the
     anti-diagonal when odd.
+
+    Parameters
+    ----------
+    alpha, m : float, optional
+        Beckmann roughness, or the Blinn-Phong exponent (``alpha = sqrt(2/(m+2))``); exactly
+        one.
+    grid : int, optional
+        Tile size in grid cells (16 to 4096). Default 256.
+    correlation_length : float, optional
+        Height correlation length in grid units. Default 8.
+    seed : int, optional
+        Non-negative integer, as in :func:`microsurface`. Default 0.
+    batch : int, optional
+        The batch, in [0, 2**32). Default 0.
+
+    Returns
+    -------
+    dict
+        With ``heights`` ``(grid, grid)`` (``heights[i, j]`` at ``x = i, y = j``, grid
+        units), ``slopes`` ``(2 grid**2, 2)``: the slopes ``(dz/dx, dz/dy)`` of the triangles
+        (each of projected area 1/2; cell ``(i, j)`` gives rows ``2 (i grid + j)`` and
+        ``+1``), ``realized_alpha`` (``sqrt(mean(sx**2 + sy**2))``, equal to ``alpha``),
+        ``slope_cov`` ``(2, 2)``, ``alpha_unscaled_ratio`` and ``height_scale``.
+
+    Raises
+    ------
+    pprender.Error
+        For an invalid argument (it is a ``ValueError``), naming the bad parameter.
     """
     a = _alpha(alpha, m)
     assert a is not None

@@ -1,7 +1,7 @@
 """Inversion: from rendered profiles to what an instrument records and back.
 
 * :mod:`~pprender.inverse.instrument`: the link budget, polarization channels, jitter,
-  background and shot noise (:func:`measure`);
+  background and shot noise (:func:`~pprender.inverse.instrument.measure`);
 * :mod:`~pprender.inverse.database`: candidate databases, shapes x materials x attitudes
   in a resumable Zarr store; :mod:`~pprender.inverse.distributed` builds them on Dask;
 * :mod:`~pprender.inverse.so3`: rotation grids and distances;

@@ -85,8 +85,10 @@ _NO_MATCH_SCORE = 1e-9
 
 
 class NoMatchWarning(UserWarning):
-    """:meth:`Classifier.top_k`: some measurement matches no candidate (best score
-    ``<= 1e-9``); see :attr:`Matches.matched`."""
+    """:meth:`Classifier.top_k`: some measurement matches no candidate (best score ``<= 1e-9``).
+
+    See :attr:`Matches.matched`.
+    """
 
 
 # --------------------------------------------------------------------------- projections
@@ -94,8 +96,20 @@ class NoMatchWarning(UserWarning):
 
 @dataclasses.dataclass(frozen=True)
 class Projection:
-    """A map from Mueller profiles ``(..., B, 4, 4)`` to channels ``(..., B, C)``
-    (``channels``: their names), applied with ``projection(mueller)``."""
+    """A map from Mueller profiles ``(..., B, 4, 4)`` to channels ``(..., B, C)``.
+
+    Applied with ``projection(mueller)``, which raises :class:`pprender.Error` for an array
+    that is not ``(..., B, 4, 4)``.
+
+    Parameters
+    ----------
+    fn : callable
+        The map, applied to a float64 array ``(..., B, 4, 4)``.
+    channels : tuple of str
+        The channels' names.
+    description : str
+        What the projection is (shown in error messages).
+    """
 
     fn: Callable[[np.ndarray], np.ndarray]
     channels: tuple[str, ...]
@@ -109,10 +123,27 @@ class Projection:
 
 
 def stokes_projection(stokes_in: Sequence[float]) -> Projection:
-    """Received Stokes profiles for a transmitted Stokes vector ``stokes_in`` (4,) in the
-    transmit basis (:mod:`pprender.lidar`): ``S[..., b, :] = M[..., b, :, :] @ stokes_in``,
-    channels ``I Q U V`` in the receiver basis; what :func:`pprender.render` returns with
-    ``Lidar(polarization=stokes_in)``."""
+    """Received Stokes profiles for a transmitted Stokes vector ``stokes_in``.
+
+    ``S[..., b, :] = M[..., b, :, :] @ stokes_in``, channels ``I Q U V`` in the receiver
+    basis: what :func:`pprender.render` returns with ``Lidar(polarization=stokes_in)``.
+
+    Parameters
+    ----------
+    stokes_in : sequence of float
+        The transmitted Stokes vector (4,), finite, in the transmit basis
+        (:mod:`pprender.lidar`).
+
+    Returns
+    -------
+    Projection
+        Channels ``("I", "Q", "U", "V")``.
+
+    Raises
+    ------
+    pprender.Error
+        For a ``stokes_in`` that is not a finite vector (4,).
+    """
     s = _numeric_array(stokes_in, "stokes_in", "a Stokes vector (4,)")
     if s.shape != (4,) or not np.all(np.isfinite(s)):
         raise Error(f"invalid stokes_in = {stokes_in!r}: a finite Stokes vector (4,)")
@@ -120,15 +151,31 @@ def stokes_projection(stokes_in: Sequence[float]) -> Projection:
 
 
 def co_cross_projection(angle: float = 0.0) -> Projection:
-    """Co- and cross-polarized received intensities for linear transmission at ``angle``
-    (rad) from the transmit basis' ``x`` axis; channels ``co``, ``cross``.
+    """Co- and cross-polarized received intensities for linear transmission at ``angle``.
 
     The transmitted state is ``s = (1, cos 2a, sin 2a, 0)``. The transmit basis is
-    ``(x, y) = (X, -Y)`` monostatically (in general ``y = -Y`` and ``x`` tilted in the
-    ``XZ`` plane; :mod:`pprender.lidar`), so the same physical polarization is at ``-a`` in
-    the receiver basis ``(X, Y)``: ``co = (S0 + cos 2a S1 - sin 2a S2) / 2`` and
-    ``cross = (S0 - cos 2a S1 + sin 2a S2) / 2`` with ``S = M s``. A mirror facing the
-    sensor (``diag(1, 1, -1, -1)``) gives ``co = 1``, ``cross = 0`` at every angle."""
+    ``(x, y) = (X, -Y)`` monostatically (in general ``y = -Y`` and ``x`` tilted in the ``XZ``
+    plane; :mod:`pprender.lidar`), so the same physical polarization is at ``-a`` in the
+    receiver basis ``(X, Y)``: ``co = (S0 + cos 2a S1 - sin 2a S2) / 2`` and
+    ``cross = (S0 - cos 2a S1 + sin 2a S2) / 2`` with ``S = M s``. A mirror facing the sensor
+    (``diag(1, 1, -1, -1)``) gives ``co = 1``, ``cross = 0`` at every angle.
+
+    Parameters
+    ----------
+    angle : float, optional
+        Angle ``a`` (rad) of the transmitted linear polarization from the transmit basis'
+        ``x`` axis, finite. Default 0.
+
+    Returns
+    -------
+    Projection
+        Channels ``("co", "cross")``.
+
+    Raises
+    ------
+    pprender.Error
+        For a non-finite ``angle``.
+    """
     if not (isinstance(angle, (int, float, np.floating)) and np.isfinite(angle)):
         raise Error(f"invalid angle = {angle!r}: a finite angle in radians")
     c, s = np.cos(2.0 * angle), np.sin(2.0 * angle)
@@ -138,8 +185,13 @@ def co_cross_projection(angle: float = 0.0) -> Projection:
 
 
 def mueller_projection() -> Projection:
-    """All 16 Mueller elements as channels (a full Mueller polarimeter), ``M_ij`` at
-    channel ``4 i + j``."""
+    """All 16 Mueller elements as channels (a full Mueller polarimeter).
+
+    Returns
+    -------
+    Projection
+        ``M_ij`` at channel ``4 i + j``, named ``"Mij"``.
+    """
     names = tuple(f"M{i}{j}" for i in range(4) for j in range(4))
     return Projection(lambda m: m.reshape(m.shape[:-2] + (16,)), names, "mueller")
 
@@ -149,13 +201,31 @@ def mueller_projection() -> Projection:
 
 @dataclasses.dataclass
 class Matches:
-    """The best ``k`` candidates per measurement (best first), arrays of shape (M, k):
-    ``index`` (into the classifier's candidates), ``score``, ``offset`` (range offset of
-    the measurement in bins, module docstring), and the candidates' labels ``shape``,
-    ``material`` (names), ``attitude_index`` and ``attitude`` (M, k, 4) quaternions, each
-    None when the classifier has no such labels. :attr:`matched` (M,) tells which
-    measurements match anything at all (best score above ``1e-9``); the others' rows
-    are no match (module docstring)."""
+    """The best ``k`` candidates per measurement (best first), arrays of shape (M, k).
+
+    Made by :meth:`Classifier.top_k`. Label arrays are None when the classifier has no such
+    labels.
+
+    Attributes
+    ----------
+    index : numpy.ndarray
+        (M, k) indices into the classifier's candidates.
+    score : numpy.ndarray
+        (M, k) scores.
+    offset : numpy.ndarray
+        (M, k) range offsets of the measurement in bins (module docstring).
+    shape : numpy.ndarray or None
+        (M, k) the candidates' shape names.
+    material : numpy.ndarray or None
+        (M, k) the candidates' material names.
+    attitude_index : numpy.ndarray or None
+        (M, k) the candidates' attitude indices.
+    attitude : numpy.ndarray or None
+        (M, k, 4) the candidates' attitudes, quaternions.
+    matched : numpy.ndarray
+        (M,) bool: which measurements match anything at all (best score above ``1e-9``); the
+        others' rows are no match (module docstring).
+    """
 
     index: np.ndarray
     score: np.ndarray
@@ -203,16 +273,23 @@ class Classifier:
         Maps the candidates' profiles to channels. Default: for a database,
         :func:`mueller_projection` (Mueller) or the stored Stokes channels; for arrays,
         none.
-    weights : None, "whiten", "lda" or array_like
-        The weight matrix ``W`` (module docstring).
-    target : {"shape", "material", "attitude"}
-        The label whose classes define learned weights.
-    max_shift : int
-        Largest range offset searched, in bins (>= 0, below ``B``).
-    regularization : float
-        Relative ridge ``lambda / (trace(S_w) / F)`` for learned weights, > 0.
+    weights : None, "whiten", "lda" or array_like, optional
+        The weight matrix ``W`` (module docstring). Default None.
+    target : {"shape", "material", "attitude"}, optional
+        The label whose classes define learned weights. Default ``"material"``.
+    max_shift : int, optional
+        Largest range offset searched, in bins (>= 0, below ``B``). Default 0.
+    regularization : float, optional
+        Relative ridge ``lambda / (trace(S_w) / F)`` for learned weights, > 0. Default 1e-2.
     n_components : int, optional
         For ``"lda"``: keep only this many discriminant directions.
+
+    Raises
+    ------
+    pprender.Error
+        For an incomplete or empty database, candidates that are all zero or vanish under
+        the weights (module docstring), labels with a database, ``n_components`` without
+        ``weights="lda"``, or other invalid arguments.
     """
 
     def __init__(
@@ -511,14 +588,35 @@ class Classifier:
         return (out_s, out_o) if return_offsets else out_s
 
     def top_k(self, measurements: Any, k: int = 5) -> Matches:
-        """The ``k`` best candidates per measurement, best first (ties: lower index
-        first), with their scores, range offsets and labels (:class:`Matches`; arrays
-        (M, k), also for a single (B, C) measurement).
+        """The ``k`` best candidates per measurement, best first (ties: lower index first).
 
         A measurement whose best score is at most ``1e-9`` matches nothing: a
-        :class:`NoMatchWarning` names it and ``Matches.matched`` is False for it (its
-        rows are still filled, by score then index, but are not matches). Raises as
-        :meth:`scores` does."""
+        :class:`NoMatchWarning` names it and ``Matches.matched`` is False for it (its rows are
+        still filled, by score then index, but are not matches).
+
+        Parameters
+        ----------
+        measurements : array_like or pprender.Measurement
+            As :meth:`scores`.
+        k : int, optional
+            Number of candidates, in [1, K]. Default 5.
+
+        Returns
+        -------
+        Matches
+            Their scores, range offsets and labels; arrays (M, k), also for a single (B, C)
+            measurement.
+
+        Raises
+        ------
+        pprender.Error
+            As :meth:`scores` does, and for ``k`` out of range.
+
+        Warns
+        -----
+        NoMatchWarning
+            For measurements that match no candidate.
+        """
         x, _ = self._measurements(measurements)
         K = self.n_candidates
         if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)) or not 1 <= k <= K:

@@ -89,8 +89,22 @@ RenderFn = Callable[[Scene, Lidar, np.ndarray], Any]
 
 
 class Chunk(NamedTuple):
-    """One unit of work: attitudes ``start:stop`` of shape ``shape`` with material
-    ``material`` (indices into the database's coordinates); ``done`` when written."""
+    """One unit of work: attitudes ``start:stop`` of one shape with one material.
+
+    Parameters
+    ----------
+    shape : int
+        Index into the database's ``shape`` coordinate.
+    material : int
+        Index into the database's ``material`` coordinate.
+    attitude_chunk : int
+        Index of the attitude chunk: attitudes ``[c * chunk_attitudes, (c + 1) *
+        chunk_attitudes)`` (module docstring).
+    start, stop : int
+        The chunk's attitudes, ``start:stop``.
+    done : bool
+        True when written.
+    """
 
     shape: int
     material: int
@@ -448,6 +462,13 @@ def pad_profile(profile: Any, bin_edges: Any, database: Any) -> np.ndarray:
     -------
     numpy.ndarray
         (N, 2 K, ...) float64, zero outside the profile's own bins (module docstring).
+
+    Raises
+    ------
+    pprender.Error
+        For something that is not a pprender database, bin edges that are not the renderer's
+        symmetric grid of the database's bin width, a profile wider than the database's range
+        window, or non-finite profiles.
     """
     if isinstance(database, (str, os.PathLike)):
         database = open_database(database)
@@ -464,8 +485,24 @@ def pad_profile(profile: Any, bin_edges: Any, database: Any) -> np.ndarray:
 
 
 def list_chunks(path: str | os.PathLike[str]) -> list[Chunk]:
-    """Every chunk of the database at ``path``, in build order (shape, then material,
-    then attitude chunk), each with ``done`` read from the store's ``complete`` flags."""
+    """Every chunk of the database at ``path``, in build order.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The database's directory.
+
+    Returns
+    -------
+    list of Chunk
+        In build order (shape, then material, then attitude chunk), each with ``done`` read
+        from the store's ``complete`` flags.
+
+    Raises
+    ------
+    pprender.Error
+        When ``path`` holds no pprender database.
+    """
     st = _Store(path)
     done = st.done()
     out = []
@@ -488,7 +525,8 @@ def write_chunk(
 
     Everything needed (meshes, materials, sensor, attitudes, range grid) is read from the
     store, so this can run in any process, e.g. as a Dask task per pending chunk of
-    :func:`list_chunks`; chunks are independent Zarr chunk files.
+    :func:`list_chunks`; chunks are independent Zarr chunk files. The ``complete`` flag is
+    written after the data, so a chunk interrupted before it is redone.
 
     Parameters
     ----------
@@ -505,6 +543,12 @@ def write_chunk(
     -------
     bool
         True if the chunk was rendered and written, False if it was already complete.
+
+    Raises
+    ------
+    pprender.Error
+        For a path without a pprender database, a chunk out of range, or a render whose
+        profile does not fit the store (shape, bin grid, range window).
     """
     st = _store if _store is not None else _Store(path)
     c = st.chunk(chunk)
@@ -533,16 +577,52 @@ def create_database(
     render: RenderFn | None = None,
     overwrite: bool = False,
 ) -> bool:
-    """Create an empty database at ``path`` (all chunks pending), or accept an existing
-    one made with the same parameters. Parameters as :func:`build_database`.
+    """Create an empty database at ``path`` (all chunks pending), or accept an identical one.
 
-    The store is assembled in a sibling directory and renamed into place, so ``path``
-    either holds a complete empty database or nothing.
+    An existing database made with the same parameters is accepted as is. The store is
+    assembled in a sibling directory and renamed into place, so ``path`` either holds a
+    complete empty database or nothing. The range grid is found by rendering one attitude of
+    each shape (module docstring).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Directory of the Zarr store (local file system).
+    shapes : Mapping[str, mesh]
+        As :func:`build_database`.
+    materials : Mapping[str, material]
+        As :func:`build_database`.
+    attitudes : array_like
+        As :func:`build_database`.
+    sensor : pprender.Lidar
+        As :func:`build_database`.
+    chunk_attitudes : int, optional
+        As :func:`build_database`.
+    range_window : float, optional
+        As :func:`build_database`.
+    dtype : {"float32", "float64"}, optional
+        As :func:`build_database`.
+    attitude_grid : JSON-serializable, optional
+        As :func:`build_database`.
+    render : callable, optional
+        As :func:`build_database`; used for the probe renders.
+    overwrite : bool, optional
+        As :func:`build_database`.
 
     Returns
     -------
     bool
         True if a new store was created, False if an identical one was already there.
+
+    Raises
+    ------
+    pprender.Error
+        As :func:`build_database`.
+
+    See Also
+    --------
+    build_database : Create and fill a database.
+    write_chunk : Fill one chunk.
     """
     return _create(
         path, shapes, materials, attitudes, sensor,
@@ -795,8 +875,7 @@ def build_database(
     Chunks are rendered and written one at a time (memory: one chunk, about
     ``chunk_attitudes x bins x 16 x 8`` bytes, whatever the number of attitudes). An
     existing database made with the same parameters is resumed: its complete chunks are
-    skipped and the result is bit for bit that of an uninterrupted build. One made with
-    different parameters raises :class:`pprender.Error` unless ``overwrite=True``.
+    skipped and the result is bit for bit that of an uninterrupted build.
 
     Parameters
     ----------
@@ -816,28 +895,37 @@ def build_database(
     sensor : pprender.Lidar
         The sensor; ``polarization=None`` stores Mueller profiles, a Stokes vector stores
         Stokes profiles.
-    chunk_attitudes : int
-        Attitudes per chunk, in [1, 1e6].
+    chunk_attitudes : int, optional
+        Attitudes per chunk, in [1, 1e6]. Default 256 (about 3 MB of float32 Mueller profiles
+        at 200 bins).
     range_window : float, optional
         Half-width (m) of the common range window; default: the largest shape's.
-    dtype : {"float32", "float64"}
-        Storage type of the profiles.
+    dtype : {"float32", "float64"}, optional
+        Storage type of the profiles. Default ``"float32"``.
     attitude_grid : JSON-serializable, optional
         A description of how the attitudes were made (e.g. ``{"method":
         "so3.grid", "n": 5000}``), recorded in the attributes.
     render : callable, optional
         ``render(scene, sensor, attitudes) -> result`` with ``.profile`` and
         ``.bin_edges`` (default :func:`pprender.render` with ``outputs=("profile",)``).
-    progress : bool
-        Show a tqdm progress bar (one step per chunk).
-    overwrite : bool
+    progress : bool, optional
+        Show a tqdm progress bar (one step per chunk). Default True.
+    overwrite : bool, optional
         Replace an existing database made with other parameters (only a pprender
-        database is ever removed; an empty directory is used as is).
+        database is ever removed; an empty directory is used as is). Default False.
 
     Returns
     -------
     xarray.Dataset
         :func:`open_database` ``(path)``.
+
+    Raises
+    ------
+    pprender.Error
+        For a database made with different parameters at ``path`` unless
+        ``overwrite=True``, a ``path`` that exists and is not a pprender database (even with
+        ``overwrite=True``), a ``range_window`` smaller than a shape's window, or other
+        invalid arguments.
     """
     _, mats = _create(
         path, shapes, materials, attitudes, sensor,
@@ -874,10 +962,28 @@ def _progress(enabled: bool, **kw: Any) -> Any:
 
 
 def open_database(path: str | os.PathLike[str], chunks: Any = None) -> Any:
-    """Open a database lazily as an :class:`xarray.Dataset` (nothing is read until
-    used). ``chunks``: passed to :func:`xarray.open_zarr` (None: lazy NumPy-backed
-    arrays without Dask; ``{}``: Dask arrays with the store's chunks). Layout: module
-    docstring. Incomplete chunks read as NaN (see ``complete``)."""
+    """Open a database lazily as an :class:`xarray.Dataset` (nothing is read until used).
+
+    Layout: module docstring. Incomplete chunks read as NaN (see ``complete``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The database's directory.
+    chunks : object, optional
+        Passed to :func:`xarray.open_zarr` (None: lazy NumPy-backed arrays without Dask;
+        ``{}``: Dask arrays with the store's chunks).
+
+    Returns
+    -------
+    xarray.Dataset
+        The database.
+
+    Raises
+    ------
+    pprender.Error
+        When ``path`` holds no pprender database.
+    """
     import xarray as xr
 
     p = Path(path)

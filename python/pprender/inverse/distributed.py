@@ -303,11 +303,7 @@ def _worker_probe(path: str | None, device: bool) -> dict[str, Any]:
 def describe_workers(client: Any, *, path: str | os.PathLike[str] | None = None) -> dict[str, dict[str, Any]]:
     """What each worker of ``client`` renders with.
 
-    Opens the render device on every worker (as its first chunk would) and returns, per
-    worker address: ``pprender_file``, ``pprender_version``, ``pid``, ``LP_NUM_THREADS``,
-    ``CUDA_VISIBLE_DEVICES``, ``device`` (:func:`pprender.device_info`),
-    ``llvmpipe_threads`` (lavapipe's render threads; 0 on a GPU) and, with ``path``,
-    ``sees_store`` (whether the worker sees the store at that path).
+    Opens the render device on every worker (as its first chunk would).
 
     Parameters
     ----------
@@ -315,6 +311,15 @@ def describe_workers(client: Any, *, path: str | os.PathLike[str] | None = None)
         A connected client.
     path : str or os.PathLike, optional
         A database path to look for on every worker.
+
+    Returns
+    -------
+    dict of str to dict
+        Per worker address: ``pprender_file``, ``pprender_version``, ``pid``,
+        ``LP_NUM_THREADS``, ``CUDA_VISIBLE_DEVICES``, ``device``
+        (:func:`pprender.device_info`), ``llvmpipe_threads`` (lavapipe's render threads; 0 on
+        a GPU) and, with ``path``, ``sees_store`` (whether the worker sees the store at that
+        path).
     """
     p = None if path is None else os.path.abspath(os.fspath(path))
     return dict(client.run(_worker_probe, p, True))
@@ -440,26 +445,44 @@ def build_database_distributed(
     retries: int = 2,
     connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
 ) -> BuildSummary:
-    """Render every shape x material x attitude into a Zarr database at ``path`` on a
-    Dask cluster: one task per pending chunk, written by the workers.
+    """Render every shape x material x attitude into a Zarr database on a Dask cluster.
 
-    The store (and the result) is that of :func:`pprender.database.build_database` with
-    the same arguments, bit for bit when the workers render on the same kind of device;
-    an existing store made with the same parameters is resumed (its complete chunks are
-    skipped), one made with other parameters raises unless ``overwrite=True``. See the
-    module docstring for failures and for running on a cluster.
+    One task per pending chunk, written by the workers. The store (and the result) is that of
+    :func:`pprender.database.build_database` with the same arguments, bit for bit when the
+    workers render on the same kind of device; an existing store made with the same
+    parameters is resumed (its complete chunks are skipped), one made with other parameters
+    raises unless ``overwrite=True``. See the module docstring for failures and for running
+    on a cluster.
 
     Parameters
     ----------
-    path, shapes, materials, attitudes, sensor, chunk_attitudes, range_window, dtype, attitude_grid, overwrite
-        As :func:`pprender.database.build_database`. ``path`` must be on a file system
-        that every worker sees at the same (absolute) path.
+    path : str or os.PathLike
+        As :func:`pprender.database.build_database`. It must be on a file system that every
+        worker sees at the same (absolute) path.
+    shapes : Mapping[str, mesh]
+        As :func:`pprender.database.build_database`.
+    materials : Mapping[str, material]
+        As :func:`pprender.database.build_database`.
+    attitudes : array_like
+        As :func:`pprender.database.build_database`.
+    sensor : pprender.Lidar
+        As :func:`pprender.database.build_database`.
+    chunk_attitudes : int, optional
+        As :func:`pprender.database.build_database`.
+    range_window : float, optional
+        As :func:`pprender.database.build_database`.
+    dtype : {"float32", "float64"}, optional
+        As :func:`pprender.database.build_database`.
+    attitude_grid : JSON-serializable, optional
+        As :func:`pprender.database.build_database`.
     render : callable, optional
         As :func:`pprender.database.build_database`; it is pickled to the workers, so it
         must be importable there (a module-level function or class).
-    progress : bool
+    progress : bool, optional
         Print the dashboard link and show a tqdm bar (one step per chunk, as results
-        arrive).
+        arrive). Default True.
+    overwrite : bool, optional
+        As :func:`pprender.database.build_database`.
     client : distributed.Client, optional
         Use this client's cluster (left running).
     scheduler_address : str, optional
@@ -468,17 +491,18 @@ def build_database_distributed(
     n_workers : int, optional
         Local cluster only (neither ``client`` nor ``scheduler_address``): worker
         processes, default the number of usable cores.
-    threads_per_worker : int
-        Local cluster only: threads per worker (1: one chunk at a time per process).
+    threads_per_worker : int, optional
+        Local cluster only: threads per worker (1, the default: one chunk at a time per
+        process).
     worker_env : Mapping[str, str], optional
         Local cluster only: environment variables of the worker processes, over the
         default ``{"LP_NUM_THREADS": str(max(1, cores // (n_workers * threads_per_worker)))}``
         (lavapipe's render threads; ignored by GPUs).
-    retries : int
+    retries : int, optional
         Times a chunk task that raises is retried (worker deaths are handled separately by
-        the scheduler, see the module docstring).
-    connect_timeout : float
-        Seconds to wait for ``scheduler_address`` to answer before raising.
+        the scheduler, see the module docstring). Default 2.
+    connect_timeout : float, optional
+        Seconds to wait for ``scheduler_address`` to answer before raising. Default 10.
 
     Returns
     -------

@@ -110,13 +110,28 @@ def _loglik(k: np.ndarray, lam: np.ndarray, log_k_factorial: Any = None) -> Any:
 
 
 def poisson_log_likelihood(counts: Any, expected: Any) -> Any:
-    """Exact Poisson log-likelihood ``sum [k log(lam) - lam - log(k!)]`` over the last two
-    axes (range bins and channels).
+    """Exact Poisson log-likelihood ``sum [k log(lam) - lam - log(k!)]`` over the last two axes.
 
-    ``counts`` (..., B, C): non-negative integers; ``expected`` (..., B, C): finite means
-    ``>= 0``; they broadcast, and leading axes are kept (a float for 2-D inputs).
-    ``lam = 0`` with ``k = 0`` contributes 0 (the pmf is 1); ``lam = 0`` with ``k > 0``
-    gives ``-inf`` (impossible data), never NaN.
+    The last two axes are range bins and channels. ``lam = 0`` with ``k = 0`` contributes 0
+    (the pmf is 1); ``lam = 0`` with ``k > 0`` gives ``-inf`` (impossible data), never NaN.
+
+    Parameters
+    ----------
+    counts : array_like
+        (..., B, C) non-negative integers.
+    expected : array_like
+        (..., B, C) finite means ``>= 0``; broadcast against ``counts``.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The log-likelihood over the leading axes, which are kept (a float for 2-D inputs).
+
+    Raises
+    ------
+    pprender.Error
+        For counts that are not finite non-negative integers, expected counts that are not
+        finite and ``>= 0``, or shapes that are not (..., B, C) or do not broadcast.
     """
     k = _counts_array(counts)
     lam = _numeric_array(expected, "expected", "an array of expected counts")
@@ -159,9 +174,25 @@ def _attitude_matrices(r: Any, name: str) -> np.ndarray:
 
 def attitude_error(r_a: Any, r_b: Any) -> Any:
     """Rotation angle (rad, in [0, pi]) of ``R_a R_b^T``: the angle between attitudes.
-    Rotation matrices (..., 3, 3), quaternions (..., 4) ``(w, x, y, z)`` (scalar first,
-    not scipy's ``as_quat()`` order) or :class:`scipy.spatial.transform.Rotation`
-    objects (single or stacked); they broadcast."""
+
+    Parameters
+    ----------
+    r_a, r_b : array_like or scipy.spatial.transform.Rotation
+        Rotation matrices (..., 3, 3), quaternions (..., 4) ``(w, x, y, z)`` (scalar first,
+        not scipy's ``as_quat()`` order) or :class:`scipy.spatial.transform.Rotation` objects
+        (single or stacked); they broadcast.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        The angles (rad), a float for single attitudes.
+
+    Raises
+    ------
+    pprender.Error
+        For values that are not finite, a zero quaternion, or a matrix that is not a rotation
+        (orthonormal with determinant +1, to 1e-6).
+    """
     a, b = _attitude_matrices(r_a, "attitude r_a"), _attitude_matrices(r_b, "attitude r_b")
     tr = np.einsum("...ij,...ij->...", a, b)  # trace(A B^T)
     ang = np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
@@ -584,15 +615,34 @@ class ForwardModel:
 
 
 def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.ndarray:
-    """Fisher information (ndim, ndim) of Poisson counts at ``theta``:
-    ``F_ij = sum_bc (d lam / d theta_i)(d lam / d theta_j) / lam``, the derivatives by
-    central differences of the rendered expected counts.
+    """Fisher information (ndim, ndim) of Poisson counts at ``theta``.
 
-    ``step``: per-parameter step (default ``1e-3`` of the bound width; shrunk to stay
-    within the bounds). ``sqrt(diag(inv(F)))`` is the Cramer-Rao standard deviation.
-    Rendering is rasterized, so ``step`` must be large enough that pixel-coverage noise
-    (of order 1e-4 relative at resolution 48 with supersampling 2) is small against the
-    change it causes.
+    ``F_ij = sum_bc (d lam / d theta_i)(d lam / d theta_j) / lam``, the derivatives by central
+    differences of the rendered expected counts. ``sqrt(diag(inv(F)))`` is the Cramer-Rao
+    standard deviation.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        The forward model.
+    theta : array_like
+        One parameter vector (ndim,), inside the bounds and not on one.
+    step : float or array_like, optional
+        Per-parameter step (default ``1e-3`` of the bound width; shrunk to stay within the
+        bounds). Rendering is rasterized, so ``step`` must be large enough that
+        pixel-coverage noise (of order 1e-4 relative at resolution 48 with supersampling 2) is
+        small against the change it causes.
+
+    Returns
+    -------
+    numpy.ndarray
+        (ndim, ndim) Fisher information matrix.
+
+    Raises
+    ------
+    pprender.Error
+        For a ``theta`` that is not one vector, outside the bounds or on a bound (central
+        differences need room on both sides), or a ``step`` that is not positive and finite.
     """
     th, single = model._thetas(theta)
     if not single:
@@ -624,10 +674,29 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.
 
 @dataclass
 class FitResult:
-    """Maximum-likelihood fit. ``x`` (ndim,) optimum, ``log_likelihood`` there,
-    ``n_evaluations`` (likelihood evaluations, all starts), ``names``, ``algorithm``,
-    ``return_code``/``message`` (nlopt's, for the best start), ``seconds`` wall time,
-    ``starts``: per start ``(x0, x, log_likelihood)``."""
+    """Maximum-likelihood fit (:func:`fit_nlopt`).
+
+    Attributes
+    ----------
+    x : numpy.ndarray
+        (ndim,) optimum.
+    log_likelihood : float
+        The log-likelihood there.
+    n_evaluations : int
+        Likelihood evaluations, all starts.
+    names : tuple of str
+        The free parameters' names.
+    algorithm : str
+        The nlopt algorithm.
+    return_code : int
+        nlopt's return code, for the best start.
+    message : str
+        nlopt's message, for the best start.
+    seconds : float
+        Wall time.
+    starts : list of tuple
+        Per start ``(x0, x, log_likelihood)``.
+    """
 
     x: np.ndarray
     log_likelihood: float
@@ -694,34 +763,48 @@ def fit_nlopt(
     Parameters
     ----------
     model : ForwardModel
-    measurement : Measurement or counts (B, C)
-    x0 : (ndim,)
-        Starting point, inside the bounds (the nlopt box constraints).
-    algorithm : {"BOBYQA", "NELDERMEAD", "COBYLA"}
-    ftol_abs : float
+        The forward model.
+    measurement : Measurement or array_like
+        The data: a :class:`Measurement` or counts (B, C).
+    x0 : array_like
+        (ndim,) starting point, inside the bounds (the nlopt box constraints).
+    algorithm : {"BOBYQA", "NELDERMEAD", "COBYLA"}, optional
+        The nlopt algorithm. Default ``"BOBYQA"``.
+    ftol_abs : float, optional
         Stop when an iteration changes ``log L`` by less than this (default 1e-6; a
         change of 0.5 in ``log L`` is one standard deviation).
-    xtol_abs : float or (ndim,), optional
-        Stop when ``x`` moves less (default ``1e-8`` of the bound widths).
-    maxeval : int
-        Likelihood evaluations per start.
-    initial_step : float or (ndim,), optional
-        Initial step / trust radius (default ``0.05`` of the bound widths).
-    n_starts : int
+    xtol_abs : float or array_like, optional
+        Stop when ``x`` moves less, one value or (ndim,) (default ``1e-8`` of the bound
+        widths).
+    maxeval : int, optional
+        Likelihood evaluations per start. Default 2000.
+    initial_step : float or array_like, optional
+        Initial step / trust radius, one value or (ndim,) (default ``0.05`` of the bound
+        widths).
+    n_starts : int, optional
         ``x0`` and ``n_starts - 1`` further starts drawn uniformly within the bounds
-        with ``numpy.random.default_rng(seed)``; the best optimum is returned.
+        with ``numpy.random.default_rng(seed)``; the best optimum is returned. Default 1.
+    seed : int, optional
+        Seed of the further starts, an integer >= 0 (default None).
 
+    Returns
+    -------
+    FitResult
+        The best start's optimum, with every start in ``starts``.
+
+    Raises
+    ------
+    pprender.Error
+        For bad arguments, and when the log-likelihood is ``-inf`` everywhere tried.
+
+    Notes
+    -----
     Log-likelihoods of ``-inf`` (invalid materials; zero expected counts where counts
     were recorded, impossible with background) are passed to nlopt as ``-1e30``. If it is
     ``-inf`` at every point tried, over all starts, there is no fit: nlopt would stop
     ("xtol reached") at ``x0`` on the flat ``-1e30``, and :class:`pprender.Error` is raised
     instead. A start that never found a finite value is kept in ``starts`` with
     ``log_likelihood = -inf``; the best start is returned.
-
-    Raises
-    ------
-    pprender.Error
-        For bad arguments, and when the log-likelihood is ``-inf`` everywhere tried.
     """
     import nlopt
 
@@ -828,12 +911,40 @@ def sample_emcee(
     drawn with ``numpy.random.default_rng(seed)``; emcee's own generator is seeded with
     ``numpy.random.RandomState(seed)``, so equal seeds give equal chains. The sampler uses
     ``vectorize=True``: each call renders a whole set of walkers (:class:`ForwardModel`).
-    Returns the :class:`emcee.EnsembleSampler` after ``n_steps`` steps (chains via
-    ``get_chain(discard=..., flat=True)``).
 
-    Every initial walker must have a finite log posterior: where the log-likelihood is
-    ``-inf`` (counts where the model expects none, no material) :class:`pprender.Error`
-    is raised, saying for how many walkers; emcee would otherwise keep them stuck.
+    Parameters
+    ----------
+    model : ForwardModel
+        The forward model.
+    measurement : Measurement or array_like
+        The data: a :class:`Measurement` or counts (B, C).
+    x0 : array_like
+        (ndim,) centre of the initial walkers, inside the bounds.
+    n_walkers : int
+        Number of walkers, at least ``2 * ndim``.
+    n_steps : int
+        Number of steps, >= 1.
+    seed : int
+        Seed of both generators, in [0, 2**32).
+    spread : float or array_like, optional
+        Initial spread in units of the bound widths, one value or (ndim,), positive. Default
+        1e-3.
+    progress : bool, optional
+        Show emcee's progress bar. Default False.
+    moves : object, optional
+        Passed to :class:`emcee.EnsembleSampler` (default None: emcee's default).
+
+    Returns
+    -------
+    emcee.EnsembleSampler
+        The sampler after ``n_steps`` steps (chains via ``get_chain(discard=..., flat=True)``).
+
+    Raises
+    ------
+    pprender.Error
+        For bad arguments, and where an initial walker does not have a finite log posterior:
+        where the log-likelihood is ``-inf`` (counts where the model expects none, no
+        material), saying for how many walkers; emcee would otherwise keep them stuck.
     """
     import emcee
 

@@ -112,9 +112,11 @@ PILE_UP_THRESHOLD = 0.1
 
 
 class PileUpWarning(UserWarning):
-    """:func:`measure` was asked for more than :data:`PILE_UP_THRESHOLD` expected counts
-    per bin and pulse: detector dead time, pile-up and saturation, which are not
-    modelled, would distort such a measurement (module docstring)."""
+    """:func:`measure` was asked for more than :data:`PILE_UP_THRESHOLD` expected counts per bin and pulse.
+
+    Detector dead time, pile-up and saturation, which are not modelled, would distort such a
+    measurement (module docstring).
+    """
 
 
 # Largest mean numpy's Poisson sampler accepts (int64 counts; its limit is 9.2234e18).
@@ -144,19 +146,37 @@ def _analyzer(state: str) -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class Channels:
-    """The receiver's polarization channels (and, for Mueller polarimeters, the
-    transmitted states).
+    """The receiver's polarization channels (and, for Mueller polarimeters, the transmitted states).
 
-    Channel ``c`` counts ``split[c] * pulse_share[c] * analyzers[c] @ M @ generators[c]``
-    per unit of the link budget, ``M`` the target's Mueller cross-section.
+    Channel ``c`` counts ``split[c] * pulse_share[c] * analyzers[c] @ M @ generators[c]`` per
+    unit of the link budget, ``M`` the target's Mueller cross-section. Arrays are stored as
+    tuples (hashable); the properties ``*_array`` give NumPy arrays.
 
-    ``names``: (C,) labels. ``analyzers``: (C, 4) analyzer rows in the received basis;
-    an ideal polarizer passing the unit state ``s`` is ``1/2 (1, s1, s2, s3)``.
-    ``generators``: (C, 4) transmitted Stokes states, unit intensity (``g0 = 1``), in the
-    transmit basis. ``split``: (C,) fraction of the received light sent to the channel's
-    analyzer (beam splitters; a polarizing beam splitter's two outputs each count 1).
-    ``pulse_share``: (C,) fraction of the pulses transmitted with the channel's generator.
-    Arrays are stored as tuples (hashable); the properties ``*_array`` give NumPy arrays.
+    Parameters
+    ----------
+    names : sequence of str
+        (C,) labels, unique.
+    analyzers : array_like
+        (C, 4) analyzer rows in the received basis; an ideal polarizer passing the unit state
+        ``s`` is ``1/2 (1, s1, s2, s3)``. Each row ``(a0, a1, a2, a3)`` needs
+        ``0 < a0 <= 1`` and ``|(a1, a2, a3)| <= a0`` (a physical analyzer).
+    generators : array_like
+        (C, 4) transmitted Stokes states, unit intensity (``g0 = 1``,
+        ``|(g1, g2, g3)| <= 1``), in the transmit basis.
+    split : array_like
+        (C,) fraction of the received light sent to the channel's analyzer, in (0, 1] (beam
+        splitters; a polarizing beam splitter's two outputs each count 1).
+    pulse_share : array_like
+        (C,) fraction of the pulses transmitted with the channel's generator, in (0, 1].
+    description : str, optional
+        A free-text description (the presets of :func:`channel_set` say what they are).
+        Default ``""``.
+
+    Raises
+    ------
+    pprender.Error
+        For no channels, repeated names, arrays of the wrong shape, non-finite values, or
+        values outside the ranges above.
     """
 
     names: tuple[str, ...]
@@ -245,23 +265,38 @@ class Channels:
 
 
 def channel_set(name: str) -> Channels:
-    """A named receiver (:data:`CHANNEL_PRESETS`):
+    """A named receiver (:data:`CHANNEL_PRESETS`).
 
-    * ``"co_cross_linear"``: transmit H (linear along ``x``); a polarizing beam splitter
-      gives ``co`` (analyzer H, parallel) and ``cross`` (V, perpendicular), each with all
-      of its polarization (split 1).
-    * ``"co_cross_circular"``: transmit R (``V = +1``); ``co`` is the handedness a mirror
-      returns (analyzer L, since a mirror flips ``V``) and ``cross`` the other (R); a
-      quarter-wave plate and a polarizing beam splitter (split 1).
-    * ``"stokes"``: transmit H; a division-of-amplitude six-state polarimeter: a
-      non-polarizing 1/3 : 1/3 : 1/3 split into three arms with polarizing beam splitters
-      analysing H/V, D/A (behind a half-wave plate) and R/L (behind a quarter-wave plate):
-      channels H, V, D, A, R, L, each with split 1/3. The Stokes vector is
-      ``3 (H + V, H - V, D - A, R - L)``.
-    * ``"mueller"``: a multi-state Mueller polarimeter: the pulses cycle through four
-      generator states H, V, D, R (a quarter of the pulses each) and the six-state
-      analyzer above records each: 24 channels ``"G->A"`` (generator G, analyzer A),
-      weight ``1/4 * 1/3``. Its measurement matrix has rank 16: the full Mueller matrix.
+    Parameters
+    ----------
+    name : {"co_cross_linear", "co_cross_circular", "stokes", "mueller"}
+        The preset:
+
+        * ``"co_cross_linear"``: transmit H (linear along ``x``); a polarizing beam splitter
+          gives ``co`` (analyzer H, parallel) and ``cross`` (V, perpendicular), each with all
+          of its polarization (split 1).
+        * ``"co_cross_circular"``: transmit R (``V = +1``); ``co`` is the handedness a mirror
+          returns (analyzer L, since a mirror flips ``V``) and ``cross`` the other (R); a
+          quarter-wave plate and a polarizing beam splitter (split 1).
+        * ``"stokes"``: transmit H; a division-of-amplitude six-state polarimeter: a
+          non-polarizing 1/3 : 1/3 : 1/3 split into three arms with polarizing beam splitters
+          analysing H/V, D/A (behind a half-wave plate) and R/L (behind a quarter-wave plate):
+          channels H, V, D, A, R, L, each with split 1/3. The Stokes vector is
+          ``3 (H + V, H - V, D - A, R - L)``.
+        * ``"mueller"``: a multi-state Mueller polarimeter: the pulses cycle through four
+          generator states H, V, D, R (a quarter of the pulses each) and the six-state
+          analyzer above records each: 24 channels ``"G->A"`` (generator G, analyzer A),
+          weight ``1/4 * 1/3``. Its measurement matrix has rank 16: the full Mueller matrix.
+
+    Returns
+    -------
+    Channels
+        The preset's channels.
+
+    Raises
+    ------
+    pprender.Error
+        For any other name.
     """
     if name == "co_cross_linear":
         return Channels(("co", "cross"), (_analyzer("H"), _analyzer("V")), (_STATES["H"],) * 2,
@@ -327,30 +362,36 @@ class Instrument:
         Transmitted energy per pulse (J), in (0, 1e3].
     target_range : float
         Range to the target (m), in (0, 1e9].
-    wavelength : float
+    wavelength : float, optional
         Laser wavelength (m), in (0, 1e-5]; must match the renderer's materials (checked
-        against a RenderResult's ``wavelength``, module docstring).
-    divergence : float
+        against a RenderResult's ``wavelength``, module docstring). Default 1064e-9.
+    divergence : float, optional
         Transmit beam divergence, full angle (rad) in (0, pi): at the 1/e^2 irradiance
-        points for ``beam="gaussian"``, the edge of the disc for ``"tophat"``.
-    beam : str
-        ``"gaussian"`` (peak irradiance at the beam centre) or ``"tophat"``.
-    aperture_diameter : float
-        Receiver aperture diameter (m), in (0, 100].
-    efficiency : float
+        points for ``beam="gaussian"``, the edge of the disc for ``"tophat"``. Default 20e-6.
+    beam : {"gaussian", "tophat"}, optional
+        ``"gaussian"`` (default; peak irradiance at the beam centre) or ``"tophat"``.
+    aperture_diameter : float, optional
+        Receiver aperture diameter (m), in (0, 100]. Default 1.
+    efficiency : float, optional
         System efficiency: receiver optics transmission times detector quantum
-        efficiency, in (0, 1].
-    transmission : float
-        One-way atmospheric transmission in (0, 1] (1 in space).
-    jitter : float
-        Detector timing jitter (s RMS, Gaussian), in [0, 1e-6].
-    background_rate : float or sequence of float
+        efficiency, in (0, 1]. Default 0.3.
+    transmission : float, optional
+        One-way atmospheric transmission in (0, 1] (1 in space). Default 1.
+    jitter : float, optional
+        Detector timing jitter (s RMS, Gaussian), in [0, 1e-6]. Default 0.
+    background_rate : float or sequence of float, optional
         Background count rate per channel (counts/s, >= 0): one value for every
-        channel or one per channel.
-    channels : str or Channels
-        A preset name (:func:`channel_set`) or a :class:`Channels`.
-    n_pulses : int
-        Number of pulses accumulated, in [1, 1e12].
+        channel or one per channel. Default 0.
+    channels : str or Channels, optional
+        A preset name (:func:`channel_set`) or a :class:`Channels`. Default
+        ``"co_cross_linear"``.
+    n_pulses : int, optional
+        Number of pulses accumulated, in [1, 1e12]. Default 1.
+
+    Raises
+    ------
+    pprender.Error
+        For a value outside its range, or one that is not a number (module docstring).
     """
 
     pulse_energy: float
@@ -489,15 +530,36 @@ def _h(u: np.ndarray, sigma: float) -> np.ndarray:
 
 
 def jitter_matrix(src_edges: Any, dst_edges: Any, sigma: float) -> np.ndarray:
-    """The (B_dst, B_src) matrix taking bin contents on ``src_edges`` to ``dst_edges``
-    after a Gaussian blur of standard deviation ``sigma`` (m, >= 0).
+    """The (B_dst, B_src) matrix taking bin contents on ``src_edges`` to ``dst_edges`` after a Gaussian blur.
 
+    Parameters
+    ----------
+    src_edges : array_like
+        (B_src + 1,) source bin edges (m), strictly increasing.
+    dst_edges : array_like
+        (B_dst + 1,) destination bin edges (m), strictly increasing.
+    sigma : float
+        Standard deviation of the Gaussian blur (m, >= 0).
+
+    Returns
+    -------
+    numpy.ndarray
+        (B_dst, B_src) fractions. Columns sum to 1 where the destination bins cover the
+        blurred source bin.
+
+    Raises
+    ------
+    pprender.Error
+        For edges that are not finite and strictly increasing, or a negative or non-finite
+        ``sigma``.
+
+    Notes
+    -----
     Each source bin's content is spread uniformly over its bin ``[a, b]``; the fraction
     landing in ``[c, d]`` is ``int_c^d int_a^b g(x - y) dy dx / (b - a)`` with ``g`` the
     Gaussian, in closed form ``[G(d-a) - G(c-a) - G(d-b) + G(c-b)] / (b - a)``,
     ``G(u) = u Phi(u / sigma) + sigma phi(u / sigma)``. ``sigma = 0`` gives the overlap
-    fractions (plain rebinning; the identity for equal edges). Columns sum to 1 where the
-    destination bins cover the blurred source bin.
+    fractions (plain rebinning; the identity for equal edges).
     """
     a = _check_edges(src_edges, "src_edges")
     d = _check_edges(dst_edges, "dst_edges")
@@ -605,25 +667,42 @@ def expected_counts(
     out_edges: Any = None,
     background: bool = True,
 ) -> np.ndarray:
-    """Noise-free expected counts (..., B_out, C): signal (link budget, channels, jitter)
-    plus background.
+    """Noise-free expected counts (..., B_out, C): signal (link budget, channels, jitter) plus background.
 
     Parameters
     ----------
-    profile : RenderResult or array
+    profile : RenderResult or array_like
         ``(..., B, 4, 4)`` Mueller profile (the instrument's generator states are applied)
         or ``(..., B, 4)`` Stokes profile rendered with ``Lidar(polarization=
         instrument.channels.transmit)`` (unit intensity), m^2 per bin. A RenderResult
         supplies its own ``bin_edges``, and its ``wavelength`` must be the instrument's
         (1e-6 relative); an array's wavelength cannot be checked (module docstring).
     instrument : Instrument
-    bin_edges : array (B + 1,), optional
-        Range bin edges of ``profile`` (m); required for an array.
-    out_edges : array, optional
-        Output bin edges (m; default ``bin_edges``): the jitter blur maps the profile
-        onto them (counts outside are lost).
-    background : bool
+        The instrument (link budget, channels, jitter, background).
+    bin_edges : array_like, optional
+        (B + 1,) range bin edges of ``profile`` (m); required for an array.
+    out_edges : array_like, optional
+        Output bin edges (m; default ``bin_edges``): the jitter blur maps the profile onto
+        them (counts outside are lost).
+    background : bool, optional
         Add the background counts (default True).
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., B_out, C) expected counts.
+
+    Raises
+    ------
+    pprender.Error
+        For a RenderResult rendered at another wavelength or without a profile, a missing
+        ``bin_edges`` with an array, a profile of the wrong shape or not finite, a Stokes
+        profile for channels with several generator states, or a profile giving a negative
+        cross-section in a channel (not physical).
+
+    See Also
+    --------
+    jitter_matrix : The jitter blur.
     """
     if not isinstance(instrument, Instrument):
         raise Error(f"invalid instrument of type {type(instrument).__name__}: expected pprender.instrument.Instrument")
@@ -640,8 +719,25 @@ def expected_counts(
 
 
 def snr(signal: Any, background: Any) -> float:
-    """``S / sqrt(S + B)`` with ``S = sum(signal)``, ``B = sum(background)`` (counts);
-    0 when both are 0."""
+    """Signal-to-noise ratio ``S / sqrt(S + B)`` of expected counts; 0 when both are 0.
+
+    Parameters
+    ----------
+    signal : array_like
+        Expected signal counts; ``S = sum(signal)``.
+    background : array_like
+        Expected background counts; ``B = sum(background)``.
+
+    Returns
+    -------
+    float
+        ``S / sqrt(S + B)``.
+
+    Raises
+    ------
+    pprender.Error
+        Unless both sums are finite and >= 0.
+    """
     s = float(np.sum(_numeric_array(signal, "signal", "counts")))
     b = float(np.sum(_numeric_array(background, "background", "counts")))
     if s < 0 or b < 0 or not (math.isfinite(s) and math.isfinite(b)):
@@ -653,10 +749,35 @@ def snr(signal: Any, background: Any) -> float:
 class Measurement:
     """What :func:`measure` returns.
 
-    ``counts`` (..., B, C) int64: Poisson draws. ``expected`` (..., B, C): their means
-    (``signal + background``). ``signal`` (..., B, C): expected signal counts.
-    ``background`` (B, C): expected background counts. ``bin_edges`` (B + 1,) m of range,
-    ``channel_names`` (C,), ``instrument``; ``seed``: the seed given, if any.
+    Indexing, ``measurement[i]``, gives the measurement(s) at ``i`` of the leading (attitude)
+    axes.
+
+    Attributes
+    ----------
+    counts : numpy.ndarray
+        (..., B, C) int64: Poisson draws.
+    expected : numpy.ndarray
+        (..., B, C): their means (``signal + background``).
+    signal : numpy.ndarray
+        (..., B, C): expected signal counts.
+    background : numpy.ndarray
+        (B, C): expected background counts.
+    bin_edges : numpy.ndarray
+        (B + 1,) m of range.
+    channel_names : tuple of str
+        (C,) channel names.
+    instrument : Instrument
+        The instrument.
+    seed : int or None
+        The seed given, if any.
+    extra : dict
+        Free-form additions; empty as :func:`measure` returns it.
+    range_axis : numpy.ndarray
+        (B,) bin centres (m).
+    time_axis : numpy.ndarray
+        (B,) round-trip delays ``2 r / c`` (s).
+    snr : float or numpy.ndarray
+        :func:`snr` of each measurement (a float, or an array over the leading axes).
     """
 
     counts: np.ndarray
@@ -732,17 +853,43 @@ def measure(
     seed: int | None = None,
     rng: np.random.Generator | None = None,
 ) -> Measurement:
-    """Simulate a measurement: expected counts (:func:`expected_counts`) and Poisson
-    shot noise drawn with ``numpy.random.default_rng(seed)`` (or ``rng``; not both).
+    """Simulate a measurement: expected counts (:func:`expected_counts`) and Poisson shot noise.
 
-    ``profile``: a :class:`pprender.RenderResult` (with a profile, rendered at the
-    instrument's wavelength) or an array ``(..., B, 4, 4)`` / ``(..., B, 4)`` with
-    ``bin_edges`` (module docstring). Returns a :class:`Measurement` on the profile's bins.
+    The noise is drawn with ``numpy.random.default_rng(seed)`` (or ``rng``; not both).
 
-    Warns :class:`PileUpWarning` where a channel expects more than
-    :data:`PILE_UP_THRESHOLD` counts per bin and per pulse (signal plus background): the
-    Poisson model ignores the dead time and pile-up that distort such counts (module
-    docstring). The measurement is still returned.
+    Parameters
+    ----------
+    profile : RenderResult or array_like
+        A :class:`pprender.RenderResult` (with a profile, rendered at the instrument's
+        wavelength) or an array ``(..., B, 4, 4)`` / ``(..., B, 4)`` with ``bin_edges``
+        (module docstring).
+    instrument : Instrument
+        The instrument.
+    bin_edges : array_like, optional
+        (B + 1,) range bin edges of an array ``profile`` (m).
+    seed : int, optional
+        Seed of ``numpy.random.default_rng``, an integer >= 0.
+    rng : numpy.random.Generator, optional
+        The generator to draw with, instead of ``seed``.
+
+    Returns
+    -------
+    Measurement
+        On the profile's bins.
+
+    Raises
+    ------
+    pprender.Error
+        For both ``seed`` and ``rng``, an invalid profile (as :func:`expected_counts`), or
+        expected counts beyond the largest Poisson mean that can be drawn (9.2e18, int64
+        counts).
+
+    Warns
+    -----
+    PileUpWarning
+        Where a channel expects more than :data:`PILE_UP_THRESHOLD` counts per bin and per
+        pulse (signal plus background): the Poisson model ignores the dead time and pile-up
+        that distort such counts (module docstring). The measurement is still returned.
     """
     if seed is not None and rng is not None:
         raise Error("invalid seed/rng: give one of them, not both")

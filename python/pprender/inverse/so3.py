@@ -54,11 +54,23 @@ def _count(name: str, n: object, lo: int = 1, hi: int = 100_000_000) -> int:
 
 
 def scipy_quaternions(x: object) -> np.ndarray | None:
-    """The ``(w, x, y, z)`` quaternions of a ``scipy.spatial.transform.Rotation`` (single:
-    ``(4,)``, stacked: ``(N, 4)``), or None when ``x`` is not one. scipy's arrays are
-    scalar-last ``(x, y, z, w)`` by default; pprender's are scalar-first, so Rotation
-    objects are accepted wherever attitudes go and converted here, never guessed from an
-    array's layout."""
+    """The ``(w, x, y, z)`` quaternions of a ``scipy.spatial.transform.Rotation``, or None.
+
+    scipy's arrays are scalar-last ``(x, y, z, w)`` by default; pprender's are scalar-first,
+    so Rotation objects are accepted wherever attitudes go and converted here, never guessed
+    from an array's layout.
+
+    Parameters
+    ----------
+    x : object
+        Anything; only a ``scipy.spatial.transform.Rotation`` is converted.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        ``(4,)`` for a single Rotation, ``(N, 4)`` for a stacked one; None when ``x`` is not a
+        Rotation.
+    """
     if type(x).__module__.startswith("scipy.spatial.transform") and hasattr(x, "as_quat"):
         q = np.asarray(x.as_quat(), dtype=np.float64)  # type: ignore[attr-defined]
         return np.ascontiguousarray(q[..., [3, 0, 1, 2]])
@@ -120,9 +132,22 @@ def grid(n: int) -> np.ndarray:
 
 
 def random(n: int, seed: int | np.random.Generator | None = None) -> np.ndarray:
-    """``n`` Haar-random rotations: normalized 4-D standard normal vectors (whose
-    direction is uniform on the 3-sphere), flipped to ``w >= 0``; (n, 4) quaternions.
-    ``seed``: anything :func:`numpy.random.default_rng` accepts."""
+    """``n`` Haar-random rotations, flipped to ``w >= 0``.
+
+    Normalized 4-D standard normal vectors, whose direction is uniform on the 3-sphere.
+
+    Parameters
+    ----------
+    n : int
+        Number of rotations, in [1, 1e8].
+    seed : int, numpy.random.Generator or None, optional
+        Anything :func:`numpy.random.default_rng` accepts. Default None.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 4) unit quaternions ``(w, x, y, z)``.
+    """
     n = _count("n", n)
     rng = np.random.default_rng(seed)
     q = rng.standard_normal((n, 4))
@@ -170,6 +195,8 @@ def nearest(queries: object, grid: object, *, block: int = 4096) -> tuple[np.nda
         (M, 4) or (4,) unit quaternions.
     grid : array_like
         (N, 4) unit quaternions, N >= 1.
+    block : int, optional
+        Queries per block, in [1, 1e8]. Default 4096.
 
     Returns
     -------
@@ -195,8 +222,20 @@ def nearest(queries: object, grid: object, *, block: int = 4096) -> tuple[np.nda
 
 
 def nearest_neighbour_distances(grid: object) -> np.ndarray:
-    """Distance (rad) from each grid rotation to the nearest other one, (N,) for (N, 4),
-    N >= 2. The smallest is the grid's separation (packing) distance."""
+    """Distance (rad) from each grid rotation to the nearest other one.
+
+    The smallest is the grid's separation (packing) distance.
+
+    Parameters
+    ----------
+    grid : array_like
+        (N, 4) unit quaternions, N >= 2.
+
+    Returns
+    -------
+    numpy.ndarray
+        (N,) angles in radians.
+    """
     g = _quaternions(grid, "grid")
     if g.ndim != 2 or len(g) < 2:
         raise Error(f"invalid grid: shape {g.shape}, expected (N, 4) with N >= 2")
@@ -210,12 +249,23 @@ def nearest_neighbour_distances(grid: object) -> np.ndarray:
 
 
 def ball_radius(n: int) -> float:
-    """Radius (rad) of the geodesic ball holding a fraction ``1/n`` of SO(3): the root of
-    ``(theta - sin theta) / pi = 1 / n`` (about ``(6 pi / n)^(1/3)`` for large ``n``).
+    """Radius (rad) of the geodesic ball holding a fraction ``1/n`` of SO(3).
 
-    ``n`` equal balls fill SO(3) exactly when their radius is this, so it is the natural
-    spacing scale of an ``n``-point grid: a grid's covering radius is larger, its
-    separation smaller. Solved by bisection to 1e-15 rad; ``n`` in [1, 1e12]."""
+    The root of ``(theta - sin theta) / pi = 1 / n`` (about ``(6 pi / n)^(1/3)`` for large
+    ``n``). ``n`` equal balls fill SO(3) exactly when their radius is this, so it is the
+    natural spacing scale of an ``n``-point grid: a grid's covering radius is larger, its
+    separation smaller. Solved by bisection to 1e-15 rad.
+
+    Parameters
+    ----------
+    n : int
+        Number of balls, in [1, 1e12].
+
+    Returns
+    -------
+    float
+        The radius (rad).
+    """
     n = _count("n", n, 1, 10**12)
     target = math.pi / n
     lo, hi = 0.0, math.pi
@@ -231,12 +281,28 @@ def ball_radius(n: int) -> float:
 
 
 def covering_radius(grid: object, n_samples: int = 100_000, seed: int | None = 0) -> float:
-    """Monte Carlo estimate (rad) of the grid's covering radius, the largest distance from
-    any rotation to its nearest grid rotation: the maximum over ``n_samples`` Haar-random
-    probes (:func:`random`) of the distance to the nearest grid point.
+    """Monte Carlo estimate (rad) of the grid's covering radius.
 
-    It is a lower bound on the true covering radius that converges from below as
-    ``n_samples`` grows (the missed region shrinks like ``1/n_samples`` of SO(3)); with
-    ``n_samples >> n`` it is typically within a few percent. Cost ``O(n_samples N)``."""
+    The covering radius is the largest distance from any rotation to its nearest grid
+    rotation; the estimate is the maximum over ``n_samples`` Haar-random probes
+    (:func:`random`) of the distance to the nearest grid point. It is a lower bound on the
+    true covering radius that converges from below as ``n_samples`` grows (the missed region
+    shrinks like ``1/n_samples`` of SO(3)); with ``n_samples >> n`` it is typically within a
+    few percent. Cost ``O(n_samples N)``.
+
+    Parameters
+    ----------
+    grid : array_like
+        (N, 4) unit quaternions.
+    n_samples : int, optional
+        Number of random probes, in [1, 1e8]. Default 100000.
+    seed : int or None, optional
+        Seed of the probes (:func:`random`). Default 0.
+
+    Returns
+    -------
+    float
+        The estimate (rad).
+    """
     probes = random(_count("n_samples", n_samples), seed)
     return float(np.max(nearest(probes, grid)[1]))

@@ -18,8 +18,23 @@ from .sensor import Lidar
 def device_info(device: str = "auto") -> dict[str, Any]:
     """Which adapter renders: name, backend, device type, driver and the limits used.
 
-    ``device``: ``"auto"`` (a GPU when present, else the CPU implementation lavapipe),
-    ``"cpu"`` (lavapipe even when a GPU is present) or ``"gpu"`` (error without one).
+    Parameters
+    ----------
+    device : {"auto", "cpu", "gpu"}, optional
+        ``"auto"`` (default: a GPU when present, else the CPU implementation lavapipe),
+        ``"cpu"`` (lavapipe even when a GPU is present) or ``"gpu"`` (an error without one).
+
+    Returns
+    -------
+    dict
+        The adapter's ``name``, ``backend``, ``device_type``, ``driver``, ``driver_info`` and
+        the limits used (``max_storage_buffer_binding_size``, ``max_texture_array_layers``,
+        ``max_texture_dimension_2d``).
+
+    Raises
+    ------
+    pprender.Error
+        For ``device="gpu"`` on a machine without one, or an unknown ``device``.
     """
     return dict(_core.device_info(device))
 
@@ -51,9 +66,12 @@ def _rotations(attitudes: Any) -> np.ndarray:
 
 
 class OffCentreWarning(UserWarning):
-    """The mesh lies far from the body origin (the rotation centre, range reference and
-    image centre): most of each image and range window is empty, and attitudes swing the
-    mesh about a point outside it. Usually a CAD model exported in another frame."""
+    """The mesh lies far from the body origin (the rotation centre, range reference and image centre).
+
+    Most of each image and range window is empty, and attitudes swing the mesh about a point
+    outside it. Usually a CAD model exported in another frame. :func:`render` warns when the
+    mesh's bounding-box centre is farther from the body origin than the mesh's own size.
+    """
 
 
 def _check_framing(scene: Scene, width: int) -> None:
@@ -102,17 +120,43 @@ def render(
 ) -> RenderResult:
     """Render ``scene`` seen by ``sensor`` at every attitude, as one batch.
 
-    ``attitudes``: (N, 4) unit quaternions ``(w, x, y, z)`` (scalar first), (N, 3, 3)
-    rotation matrices or a ``scipy.spatial.transform.Rotation``, body to telescope
-    (module docstring). A mesh too small for the image's pixels (under 2 across: it lies
-    far from the body origin, or the resolution is tiny) is refused; one far from the body
-    origin warns (:class:`OffCentreWarning`).
+    Only what is requested is computed and read back. Batches are split into chunks that fit
+    the device; results equal single calls.
 
-    ``outputs``: any of ``"profile"``, ``"mueller"`` (needs ``polarization=None``),
-    ``"stokes"`` (needs a ``polarization``), ``"range"`` (range map and coverage);
-    ``cross_section`` is always returned. Only what is requested is computed and read
-    back. Batches are split into chunks that fit the device; results equal single calls.
-    ``device``: ``"auto"``, ``"cpu"`` (lavapipe) or ``"gpu"`` (see :func:`device_info`).
+    Parameters
+    ----------
+    scene : Scene
+        The mesh and its materials, built at the sensor's wavelength.
+    sensor : Lidar
+        The laser, receiver and render settings.
+    attitudes : array_like or scipy.spatial.transform.Rotation
+        (N, 4) unit quaternions ``(w, x, y, z)`` (scalar first), (N, 3, 3) rotation matrices
+        or a ``scipy.spatial.transform.Rotation``, body to telescope (module docstring).
+    outputs : sequence of str, optional
+        Any of ``"profile"``, ``"mueller"`` (needs ``polarization=None``), ``"stokes"``
+        (needs a ``polarization``), ``"intensity"`` (needs ``intensity_only=True``),
+        ``"range"`` (range map and coverage); ``cross_section`` is always returned. Default
+        ``("profile", "mueller", "range")``.
+    device : {"auto", "cpu", "gpu"}, optional
+        ``"auto"`` (default), ``"cpu"`` (lavapipe) or ``"gpu"`` (see :func:`device_info`).
+
+    Returns
+    -------
+    RenderResult
+        The requested arrays and the cross-sections.
+
+    Raises
+    ------
+    pprender.Error
+        For a mesh too small for the image's pixels (under 2 across: it lies far from the body
+        origin, or the resolution is tiny), outputs the sensor cannot give, materials built
+        at another wavelength than the sensor's (beyond 1e-6 relative), an empty or invalid
+        batch of attitudes, or an unknown ``device``.
+
+    Warns
+    -----
+    OffCentreWarning
+        For a mesh far from the body origin.
     """
     if not isinstance(scene, Scene):
         raise Error(f"invalid scene of type {type(scene).__name__}: expected pprender.Scene")

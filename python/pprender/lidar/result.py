@@ -12,15 +12,50 @@ from .sensor import SPEED_OF_LIGHT
 
 @dataclass
 class RenderResult:
-    """What :func:`render` returns; arrays are NumPy, only the requested ones are set.
+    """What :func:`pprender.render` returns; arrays are NumPy, only the requested ones are set.
 
-    ``cross_section``: (N, 4, 4) total Mueller lidar cross-section in m^2, or (N, 4) Stokes
-    when the sensor has a ``polarization``. ``profile``: (N, B, 4, 4) or (N, B, 4), m^2 per
-    bin, summing over bins to ``cross_section``; ``range_axis`` (B,) bin centres (m),
-    ``bin_edges`` (B+1,), ``time_axis`` (B,) round-trip delays ``2 r / c`` (s).
-    ``mueller`` (N, H, W, 4, 4) / ``stokes`` (N, H, W, 4) / ``intensity`` (N, H, W): m^2 per pixel. ``range``
-    (N, H, W) metres, the mean over the pixel's covered visibility samples, NaN where
-    nothing is seen; ``coverage`` (N, H, W) the covered fraction of its samples.
+    Attributes
+    ----------
+    cross_section : numpy.ndarray
+        (N, 4, 4) total Mueller lidar cross-section in m^2, or (N, 4) Stokes when the sensor
+        has a ``polarization`` ((N,) intensity with ``intensity_only``).
+    bin_edges : numpy.ndarray
+        (B+1,) profile bin edges (m of range).
+    pixel_size : float
+        Side of an image pixel (m).
+    extent : float
+        Image half-width (m): images span ``[-extent, extent]`` in X and Y, ``extent`` the
+        radius of the mesh's bounding sphere about the body origin (:mod:`pprender.lidar`).
+    device : str
+        What rendered: the adapter's name, or the f64 twin or reference renderer.
+    profile : numpy.ndarray or None
+        (N, B, 4, 4) or (N, B, 4) ((N, B) with ``intensity_only``), m^2 per bin, summing over
+        bins to ``cross_section``.
+    mueller : numpy.ndarray or None
+        (N, H, W, 4, 4) Mueller images, m^2 per pixel.
+    stokes : numpy.ndarray or None
+        (N, H, W, 4) Stokes images, m^2 per pixel.
+    intensity : numpy.ndarray or None
+        (N, H, W) intensity images (``intensity_only``), m^2 per pixel.
+    range : numpy.ndarray or None
+        (N, H, W) metres, the mean over the pixel's covered visibility samples, NaN where
+        nothing is seen.
+    coverage : numpy.ndarray or None
+        (N, H, W) the covered fraction of the pixel's samples (set with ``range``).
+    table_seconds : float
+        Time spent preparing the BRDF tables for this render (s; 0 for
+        ``quality="reference"``).
+    extra : dict
+        Free-form additions; empty as :func:`pprender.render` returns it.
+    wavelength : float or None
+        The sensor's wavelength (m) the render was made at (the materials' wavelength); None
+        for a result assembled by hand.
+    range_axis : numpy.ndarray
+        (B,) bin centres (m).
+    time_axis : numpy.ndarray
+        (B,) round-trip delays ``2 r / c`` (s).
+    mask : numpy.ndarray or None
+        ``coverage > 0``: the pixels where something is seen (None without ``coverage``).
     """
 
     cross_section: np.ndarray

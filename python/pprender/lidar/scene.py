@@ -24,32 +24,74 @@ def _resolve_material(m: Any, wavelength: float) -> Material:
 class Scene:
     """A mesh with its materials, ready to render.
 
-    ``mesh``: a ``trimesh.Trimesh``, a ``trimesh.Scene`` (e.g. ``trimesh.load("sat.glb")``;
-    each node of ``scene.graph.nodes_geometry`` is a part, its geometry moved by the node's
-    transform, instances included) or a ``(vertices, faces)`` pair of arrays. Vertices are
-    taken in metres in the body frame as given, with no axis conversion (glTF is Y-up:
-    rotate it yourself); a mesh more than 50 m across or in other units gives a
-    :class:`pprender.mesh.UnitsWarning`. :mod:`pprender.mesh` states all of this, the
-    flattened face order and how to rotate a model.
+    Loading and material assignment are :mod:`pprender.mesh`'s (:func:`pprender.mesh.flatten`,
+    :func:`pprender.mesh.assign_materials`).
 
-    ``materials``: one material for the whole mesh; a list indexed by ``face_material``
-    (default: the mesh's per-face part index, :func:`pprender.mesh.flatten`'s
-    ``face_part``, so one material per part in ``parts`` order); or a mapping from name to
-    material: a model's part names (:mod:`pprender.models`, ``metadata["pprender_parts"]``)
-    or, for a ``trimesh.Scene``, node, geometry (``scene.geometry`` keys) or material
-    (``geometry.visual.material.name``) names, each node taking the most specific key
-    that names it (node > geometry > material). Materials may be :class:`pprender.Material`
-    objects or names from :mod:`pprender.materials` (built at ``wavelength``, m).
-    ``face_material``: (F,) indices into the material list, in the flattened face order.
-    ``smooth=True`` interpolates vertex normals (from the mesh, or ``normals``) for
-    shading; the default shades flat faces, which is right for boxes and panels.
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh, trimesh.Scene or (vertices, faces)
+        A ``trimesh.Trimesh``, a ``trimesh.Scene`` (e.g. ``trimesh.load("sat.glb")``; each
+        node of ``scene.graph.nodes_geometry`` is a part, its geometry moved by the node's
+        transform, instances included) or a ``(vertices, faces)`` pair of arrays. Vertices
+        are taken in metres in the body frame as given, with no axis conversion (glTF is
+        Y-up: rotate it yourself). :mod:`pprender.mesh` states all of this, the flattened
+        face order and how to rotate a model.
+    materials : Material, str, sequence or mapping
+        One material for the whole mesh; a list indexed by ``face_material`` (default: the
+        mesh's per-face part index, :func:`pprender.mesh.flatten`'s ``face_part``, so one
+        material per part in ``parts`` order); or a mapping from name to material: a model's
+        part names (:mod:`pprender.models`, ``metadata["pprender_parts"]``) or, for a
+        ``trimesh.Scene``, node, geometry (``scene.geometry`` keys) or material
+        (``geometry.visual.material.name``) names, each node taking the most specific key
+        that names it (node > geometry > material). Materials may be
+        :class:`pprender.Material` objects or names from :mod:`pprender.materials` (built at
+        ``wavelength``).
+    face_material : array_like, shape (F,), optional
+        Indices into the material list, in the flattened face order.
+    smooth : bool, optional
+        True interpolates vertex normals (from the mesh, or ``normals``) for shading; the
+        default (False) shades flat faces, which is right for boxes and panels.
+    normals : array_like, shape (V, 3), optional
+        Vertex normals, one per vertex of the flattened mesh, instead of the mesh's own.
+    wavelength : float, optional
+        Wavelength (m) at which materials given by name are built. Default 1064e-9.
 
-    Attributes: ``materials`` (in material-index order) and ``parts`` (their names, None
-    without named parts); ``vertices``, ``faces`` (flattened), ``face_material`` (each
-    face's index into ``materials``), ``face_part`` (each face's index into the mesh's
-    parts, ``pprender.mesh.flatten(mesh).parts``; None without parts) and ``matched``
-    (for a mapping: part or node name -> :class:`pprender.mesh.Match`, the key that gave
-    it its material and whether it named the node, geometry or material).
+    Attributes
+    ----------
+    materials : list of Material
+        The materials, in material-index order.
+    parts : list of str or None
+        Their names (None without named parts).
+    vertices : numpy.ndarray
+        The flattened vertices (m, body frame).
+    faces : numpy.ndarray
+        The flattened faces.
+    face_material : numpy.ndarray
+        Each face's index into ``materials``.
+    face_part : numpy.ndarray or None
+        Each face's index into the mesh's parts, ``pprender.mesh.flatten(mesh).parts``; None
+        without parts.
+    matched : dict of str to pprender.mesh.Match, or None
+        For a mapping: part or node name -> :class:`pprender.mesh.Match`, the key that gave it
+        its material and whether it named the node, geometry or material.
+    radius : float
+        Bounding-sphere radius about the body origin (m): the image half-width.
+    n_faces : int
+        Number of faces.
+
+    Raises
+    ------
+    pprender.Error
+        For an invalid mesh or materials (:mod:`pprender.mesh`), ``normals`` that are not one
+        (3,) vector per vertex, or ``smooth=True`` without vertex normals (neither
+        ``normals`` nor a trimesh mesh).
+
+    Warns
+    -----
+    pprender.mesh.UnitsWarning
+        For a mesh more than 50 m across or in other units than metres.
+    pprender.mesh.SkippedGeometryWarning
+        For ``trimesh.Scene`` nodes whose geometry is not a triangle mesh (left out).
     """
 
     def __init__(

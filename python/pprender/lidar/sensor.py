@@ -27,75 +27,116 @@ def _is_int(x: Any) -> bool:
 
 @dataclass(frozen=True)
 class Lidar:
-    """The laser and receiver.
+    """The laser and receiver: wavelength, pulse, polarization, geometry and render settings.
 
-    ``pulse_fwhm`` (s): Gaussian pulse full width at half maximum (the received pulse; a
-    range FWHM of ``c pulse_fwhm / 2``). ``pulse_samples``: a measured or modelled pulse
-    shape instead (received power, any scale, >= 0) sampled every ``pulse_sample_spacing``
-    seconds; the samples are joined linearly (going to zero one spacing beyond each end)
-    and the shape is placed with its centroid at range 0, as the Gaussian's centre. Its
-    profile is exact in f64 but accumulated on the host from the kernel's per-pixel range
-    footprints, several times slower than the Gaussian's on-device accumulation
-    (docs/render-benchmark.md); ``pulse_fwhm`` is then ignored and the defaults below use
-    the FWHM of the Gaussian with the sampled shape's variance. ``bin_width`` (m of range): profile bin width,
-    default a quarter of the range FWHM. ``resolution``: image side in pixels, default
-    such that a pixel is a quarter of the range FWHM across (clamped to [64, 1024]): about
-    1e-3 relative error of cross-sections for generic orientations (edges aligned with the
-    pixel grid alias more; docs/render-accuracy.md).
-    ``supersampling``: sub-pixels per pixel side for visibility and the profile.
-    ``pixel_samples``: visibility samples per (sub-)pixel, 1, 2, 4, 8 or 16 (default: the
-    quality preset's). The pixel's area is shared among the surfaces its samples see, each
-    shaded once at the mean of its samples (a (0, m, 2)-net: one sample in each of the
-    ``K`` rows and columns of the pixel, so an edge's coverage is resolved to ``1/K`` of a
-    pixel, and a sliver thinner than a pixel is still seen); pixels that see one surface
-    cost one shading as with ``1``. This is what makes silhouettes, panel edges and thin
-    parts area-correct (docs/render-accuracy.md); ``supersampling`` refines everything at
-    ``supersampling^2`` times the cost.
-    ``coverage``: ``"sampled"`` (default: the ``pixel_samples`` above) or ``"analytic"``:
-    one raster sample per pixel finds the triangles around it (those seen at the centres of
-    the pixel's 3x3 neighbourhood, and their edge neighbours on the mesh), and each one's
-    visible part of the pixel is computed exactly by clipping the triangles to the pixel in
-    depth order; each is shaded once at the centroid of its part. Edges then cost no more
-    samples: coverage is exact to f32 rounding wherever at most 32 triangles overlap a pixel
-    (else, at a vertex shared by dozens of triangles, the pixel falls back to its centre
-    sample). Needs ``pixel_samples`` 1 (or unset).
-    ``quality``: the speed/accuracy dial (:data:`QUALITY`; docs/tradeoff.md measures each):
-    ``"fast"`` (coarse BRDF tables, pixels half the range FWHM across), ``"balanced"``
-    (the default grids and resolution), ``"accurate"`` (fine tables, double bounce at
-    order 96, pixels an eighth of the range FWHM) or ``"reference"`` (the exact f64 CPU
-    renderer: every pixel's BRDF evaluated by the core, no tables; slow). ``table``:
-    individual overrides of the preset's BRDF table grid, a mapping with any of ``n_z``,
-    ``n_psi`` (single term), ``n_z_lambertian``, ``n_psi_lambertian`` (multiple + diffuse),
-    ``n_z_double``, ``n_psi_double``, ``double_order`` (:func:`pprender.brdf_table`).
-    ``resolution`` and ``pixel_samples`` given explicitly override the preset's.
-    ``arithmetic``: ``"f32"`` (the device kernel, default) or ``"f64"``: the kernel's f64
-    CPU twin, the same tables, visibility samples and pulse integration in double precision
-    (with rayon, on the CPU whatever ``device``; bistatic cast shadows by exact rays instead
-    of the kernel's shadow map). It isolates what f32 arithmetic costs in accuracy: about
-    3e-5 of a pixel's M00, half the tables' own interpolation error, and 1e-6 to 1e-4 of
-    a profile, growing with the pixel's range footprint (docs/tradeoff.md measures both).
-    It is also a native CPU renderer: on a machine without a GPU it can be faster than
-    lavapipe (1.3x for profiles, 4x to 5x for images on 2 cores here,
-    docs/render-benchmark.md, docs/equal-error.md); on a GPU ``"f32"`` is
-    the choice. ``quality="reference"`` is f64 already (``arithmetic`` unset or ``"f64"``).
-    ``brdf``: ``"table"`` (default) looks every term up in the per-material tables of
-    :func:`pprender.brdf_table`; ``"shader"`` evaluates the single, multiple and diffuse
-    terms per pixel in the kernel instead (and in its twin for ``arithmetic="f64"``): the
-    microfacet distribution, the complex Fresnel amplitudes and their Mueller matrix, the
-    masking correlation, the masking excess and the albedos from the material's own 1D
-    tables. That is the core's model for the default ``masking="table"`` (the Smith and
-    seed closed forms and ``"exact"`` go through a 512-node table of theirs, within 1e-6
-    and 5e-6 of M00), so only f32 arithmetic remains: the tables' grids (``n_z``,
-    ``n_psi``, ``n_z_lambertian``, ``n_psi_lambertian``) and their interpolation error drop
-    out, and no such tables are built. The double bounce stays tabulated (it is an integral
-    per pixel). What it costs and gains is in docs/tradeoff.md.
-    ``intensity_only``: with a ``polarization``, compute only the received intensity ``S0``
-    (``"intensity"`` images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel
-    then looks up only the Mueller elements it needs (``M00`` alone for an unpolarized
-    transmitter).
-    ``bistatic_angle`` (rad) in [0, pi/2). ``polarization``: transmitted Stokes vector
-    (4,) in the transmit basis, or None for full Mueller output. ``wavelength`` (m) must
-    match the materials' wavelength (their refractive indices are for one wavelength).
+    Parameters
+    ----------
+    wavelength : float, optional
+        Laser wavelength (m). It must match the materials' wavelength (their refractive
+        indices are for one wavelength). Default 1064e-9.
+    pulse_fwhm : float, optional
+        Gaussian pulse full width at half maximum (s): the received pulse, a range FWHM of
+        ``c pulse_fwhm / 2``. Ignored when ``pulse_samples`` is given. Default 100e-12.
+    bin_width : float, optional
+        Profile bin width (m of range). Default (None): a quarter of the range FWHM.
+    resolution : int, optional
+        Image side in pixels, in [1, 8192]; given explicitly, it overrides the ``quality``
+        preset's. Default (None): the preset's; with the default ``"balanced"``, such that a
+        pixel is a quarter of the range FWHM across (clamped to [64, 1024]): about 1e-3
+        relative error of cross-sections for generic orientations (edges aligned with the
+        pixel grid alias more; docs/render-accuracy.md). See :meth:`effective_resolution`.
+    bistatic_angle : float, optional
+        Bistatic angle (rad) in [0, pi/2). Default 0.
+    polarization : sequence of float, optional
+        Transmitted Stokes vector (4,) in the transmit basis (``S0 > 0``, physical), or None
+        (default) for full Mueller output.
+    supersampling : int, optional
+        Sub-pixels per pixel side for visibility and the profile, in [1, 64]. It refines
+        everything at ``supersampling^2`` times the cost. Default 1.
+    pixel_samples : int, optional
+        Visibility samples per (sub-)pixel: 1, 2, 4, 8 or 16; given explicitly, it overrides
+        the ``quality`` preset's. Default (None): the preset's. The pixel's area is shared
+        among the surfaces its samples see, each shaded once at the mean of its samples (a
+        (0, m, 2)-net: one sample in each of the ``K`` rows and columns of the pixel, so an
+        edge's coverage is resolved to ``1/K`` of a pixel, and a sliver thinner than a pixel
+        is still seen); pixels that see one surface cost one shading as with ``1``. This is
+        what makes silhouettes, panel edges and thin parts area-correct
+        (docs/render-accuracy.md).
+    coverage : {"sampled", "analytic"}, optional
+        ``"sampled"`` (default): the ``pixel_samples`` above. ``"analytic"``: one raster
+        sample per pixel finds the triangles around it (those seen at the centres of the
+        pixel's 3x3 neighbourhood, and their edge neighbours on the mesh), and each one's
+        visible part of the pixel is computed exactly by clipping the triangles to the pixel
+        in depth order; each is shaded once at the centroid of its part. Edges then cost no
+        more samples: coverage is exact to f32 rounding wherever at most 32 triangles overlap
+        a pixel (else, at a vertex shared by dozens of triangles, the pixel falls back to its
+        centre sample). Needs ``pixel_samples`` 1 (or unset).
+    pulse_samples : sequence of float, optional
+        A measured or modelled pulse shape instead of the Gaussian: received power, any
+        scale, >= 0 (1 to 100000 finite values with a positive sum), sampled every
+        ``pulse_sample_spacing`` seconds. The samples are joined linearly (going to zero one
+        spacing beyond each end) and the shape is placed with its centroid at range 0, as the
+        Gaussian's centre. Its profile is exact in f64 but accumulated on the host from the
+        kernel's per-pixel range footprints, several times slower than the Gaussian's
+        on-device accumulation (docs/render-benchmark.md). ``pulse_fwhm`` is then ignored and
+        the defaults of ``bin_width`` and ``resolution`` use the FWHM of the Gaussian with the
+        sampled shape's variance.
+    pulse_sample_spacing : float, optional
+        Spacing of ``pulse_samples`` (s), positive; given together with them.
+    quality : {"fast", "balanced", "accurate", "reference"}, optional
+        The speed/accuracy dial (:data:`QUALITY`; docs/tradeoff.md measures each):
+        ``"fast"`` (coarse BRDF tables, pixels half the range FWHM across), ``"balanced"``
+        (default: the default grids and resolution), ``"accurate"`` (fine tables, double
+        bounce at order 96, pixels an eighth of the range FWHM) or ``"reference"`` (the exact
+        f64 CPU renderer: every pixel's BRDF evaluated by the core, no tables; slow).
+    table : mapping of str to int, optional
+        Individual overrides of the preset's BRDF table grid, with any of ``n_z``, ``n_psi``
+        (single term), ``n_z_lambertian``, ``n_psi_lambertian`` (multiple + diffuse),
+        ``n_z_double``, ``n_psi_double``, ``double_order`` (:func:`pprender.brdf_table`),
+        each an integer in [2, 65536]. Stored as a sorted tuple of ``(key, value)`` pairs.
+    intensity_only : bool, optional
+        With a ``polarization``, compute only the received intensity ``S0`` (``"intensity"``
+        images (N, H, W), profiles (N, B), cross-sections (N,)); the kernel then looks up only
+        the Mueller elements it needs (``M00`` alone for an unpolarized transmitter). Default
+        False.
+    arithmetic : {"f32", "f64"}, optional
+        ``"f32"`` (the device kernel, default) or ``"f64"``: the kernel's f64 CPU twin, the
+        same tables, visibility samples and pulse integration in double precision (with
+        rayon, on the CPU whatever ``device``; bistatic cast shadows by exact rays instead of
+        the kernel's shadow map). It isolates what f32 arithmetic costs in accuracy: about
+        3e-5 of a pixel's M00, half the tables' own interpolation error, and 1e-6 to 1e-4 of a
+        profile, growing with the pixel's range footprint (docs/tradeoff.md measures both).
+        It is also a native CPU renderer: on a machine without a GPU it can be faster than
+        lavapipe (1.3x for profiles, 4x to 5x for images on 2 cores here,
+        docs/render-benchmark.md, docs/equal-error.md); on a GPU ``"f32"`` is the choice.
+        ``quality="reference"`` is f64 already (``arithmetic`` unset or ``"f64"``).
+    brdf : {"table", "shader"}, optional
+        ``"table"`` (default) looks every term up in the per-material tables of
+        :func:`pprender.brdf_table`; ``"shader"`` evaluates the single, multiple and diffuse
+        terms per pixel in the kernel instead (and in its twin for ``arithmetic="f64"``): the
+        microfacet distribution, the complex Fresnel amplitudes and their Mueller matrix, the
+        masking correlation, the masking excess and the albedos from the material's own 1D
+        tables. That is the core's model for the default ``masking="table"`` (the Smith and
+        seed closed forms and ``"exact"`` go through a 512-node table of theirs, within 1e-6
+        and 5e-6 of M00), so only f32 arithmetic remains: the tables' grids (``n_z``,
+        ``n_psi``, ``n_z_lambertian``, ``n_psi_lambertian``) and their interpolation error
+        drop out, and no such tables are built. The double bounce stays tabulated (it is an
+        integral per pixel). What it costs and gains is in docs/tradeoff.md. Not with
+        ``quality="reference"``.
+
+    Raises
+    ------
+    pprender.Error
+        For an invalid field, named in the message: a value out of the ranges above,
+        ``brdf="shader"`` or ``arithmetic="f32"`` with ``quality="reference"``,
+        ``intensity_only`` without a ``polarization``, ``coverage="analytic"`` with
+        ``pixel_samples`` other than 1, a non-physical ``polarization``
+        (``sqrt(S1^2 + S2^2 + S3^2) > S0``), or only one of ``pulse_samples`` and
+        ``pulse_sample_spacing``.
+
+    See Also
+    --------
+    pprender.brdf_table : The per-material BRDF tables and their grid keywords.
     """
 
     wavelength: float = 1064e-9
