@@ -22,7 +22,7 @@ import numpy as np
 
 from . import _core
 from ._core import BrdfTable, Error, Material, __version__, brdf_table
-from .lidar import SPEED_OF_LIGHT, Lidar, OffCentreWarning, RenderResult, Scene, device_info, render
+from .lidar import SPEED_OF_LIGHT, Lidar, OffCentreWarning, RenderResult, Scene, Settings, device_info, render
 from . import inverse  # noqa: E402  (its modules' heavy imports are lazy)
 from .inverse import classify, database, distributed, instrument, so3  # noqa: E402
 from .inverse.classify import Classifier, NoMatchWarning
@@ -56,6 +56,7 @@ __all__ = [
     "RenderResult",
     "SPEED_OF_LIGHT",
     "Scene",
+    "Settings",
     "device_info",
     "render",
     "__version__",

@@ -32,7 +32,7 @@ from .dispatch import OffCentreWarning, _check_framing, _rotations, device_info,
 from .result import _OUTPUTS, RenderResult  # noqa: E402
 from .scene import Scene, _mesh_arrays, _resolve_material  # noqa: E402
 from .sensor import _FWHM_PER_SIGMA, SPEED_OF_LIGHT, Lidar, _is_int, _is_real  # noqa: E402
-from .settings import _TABLE_KEYS, QUALITY  # noqa: E402
+from .settings import _TABLE_KEYS, QUALITY, Settings  # noqa: E402
 
-__all__ = ["Lidar", "OffCentreWarning", "QUALITY", "RenderResult", "Scene", "device_info", "render",
+__all__ = ["Lidar", "OffCentreWarning", "QUALITY", "RenderResult", "Scene", "Settings", "device_info", "render",
            "SPEED_OF_LIGHT"]

@@ -13,6 +13,7 @@ from .._core import Error
 from .result import _OUTPUTS, RenderResult
 from .scene import Scene
 from .sensor import Lidar
+from .settings import Settings
 
 
 def device_info(device: str = "auto") -> dict[str, Any]:
@@ -117,6 +118,7 @@ def render(
     outputs: Sequence[str] = ("profile", "mueller", "range"),
     *,
     device: str = "auto",
+    settings: Settings | None = None,
 ) -> RenderResult:
     """Render ``scene`` seen by ``sensor`` at every attitude, as one batch.
 
@@ -139,6 +141,10 @@ def render(
         ``("profile", "mueller", "range")``.
     device : {"auto", "cpu", "gpu"}, optional
         ``"auto"`` (default), ``"cpu"`` (lavapipe) or ``"gpu"`` (see :func:`device_info`).
+    settings : Settings, optional
+        How to compute it (quality, resolution, samples, tables, arithmetic): these replace
+        the sensor's own (:attr:`Lidar.settings`), so one sensor can be rendered at several
+        settings. Default: the sensor's.
 
     Returns
     -------
@@ -191,19 +197,24 @@ def render(
     rot = _rotations(attitudes)
     if len(rot) == 0:
         raise Error("invalid attitudes: empty batch (N = 0)")
-    reference = sensor.quality == "reference"
-    topts: dict[str, Any] = {} if reference else dict(sensor.table_options())
-    if sensor.brdf == "shader":
+    if settings is None:
+        settings = sensor.settings
+    elif not isinstance(settings, Settings):
+        raise Error(f"invalid settings of type {type(settings).__name__}: expected pprender.Settings")
+    st = settings
+    reference = st.quality == "reference"
+    topts: dict[str, Any] = {} if reference else dict(st.table_options())
+    if st.brdf == "shader":
         topts["in_shader"] = True
     t_tables = 0.0 if reference else float(scene._core.prepare(float(sensor.bistatic_angle), **topts))
-    res = sensor.effective_resolution(scene.radius)
-    _check_framing(scene, res * int(sensor.supersampling))
+    res = st.effective_resolution(scene.radius, sensor.range_fwhm)
+    _check_framing(scene, res * int(st.supersampling))
     pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]
     d = scene._core.render(
         rot,
         resolution=res,
-        supersampling=int(sensor.supersampling),
-        samples=sensor.effective_pixel_samples(),
+        supersampling=int(st.supersampling),
+        samples=st.effective_pixel_samples(),
         bistatic_angle=float(sensor.bistatic_angle),
         polarization=pol,
         intensity_only=bool(sensor.intensity_only),
@@ -212,10 +223,10 @@ def render(
         image=("mueller" in outputs or "stokes" in outputs or "intensity" in outputs),
         range="range" in outputs,
         profile="profile" in outputs,
-        device="reference" if reference else ("twin" if sensor.effective_arithmetic() == "f64" else device),
+        device="reference" if reference else ("twin" if st.effective_arithmetic() == "f64" else device),
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
-        analytic=sensor.coverage == "analytic",
+        analytic=st.coverage == "analytic",
         **topts,
     )
     n = len(rot)

@@ -1,0 +1,50 @@
+"""Render settings apart from the sensor's optics (issue 22): ``pprender.Settings`` given to
+``render`` replaces the sensor's own, and equals the same keywords given to ``Lidar`` bit
+for bit; the Lidar keeps taking them (its ``settings``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pprender
+from pprender import models
+
+SCENE = pprender.Scene(models.sphere(0.3, 2), pprender.Material("beckmann", alpha=0.3, eta=1.5))
+Q = np.array([[1.0, 0, 0, 0], [0.8, 0.2, -0.4, 0.4]])
+Q /= np.linalg.norm(Q, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("kw", [dict(quality="fast", resolution=32),
+                                dict(resolution=24, pixel_samples=4, arithmetic="f64"),
+                                dict(resolution=16, supersampling=2, brdf="shader", table={"n_z_double": 16})])
+def test_settings_given_to_render_equal_the_lidar_keywords(kw) -> None:
+    a = pprender.render(SCENE, pprender.Lidar(**kw), Q, outputs=("profile", "mueller"))
+    b = pprender.render(SCENE, pprender.Lidar(), Q, outputs=("profile", "mueller"), settings=pprender.Settings(**kw))
+    np.testing.assert_array_equal(a.profile, b.profile)
+    np.testing.assert_array_equal(a.mueller, b.mueller)
+    assert a.device == b.device
+    assert pprender.Lidar(**kw).settings == pprender.Settings(**kw)
+
+
+def test_settings_replace_the_sensors() -> None:
+    sensor = pprender.Lidar(quality="accurate", resolution=64)
+    r = pprender.render(SCENE, sensor, Q[:1], outputs=("profile", "mueller"), settings=pprender.Settings(resolution=20))
+    assert r.mueller.shape[1:3] == (20, 20)
+
+
+@pytest.mark.parametrize("kw, name", [(dict(quality="best"), "quality"), (dict(resolution=0), "resolution"),
+                                      (dict(pixel_samples=3), "pixel_samples"), (dict(brdf="exact"), "brdf"),
+                                      (dict(table={"n_z": 1}), "table"), (dict(arithmetic="f16"), "arithmetic"),
+                                      (dict(coverage="analytic", pixel_samples=4), "pixel_samples"),
+                                      (dict(supersampling="2"), "supersampling")])
+def test_bad_settings_name_the_parameter(kw, name) -> None:
+    with pytest.raises(pprender.Error, match=rf"\b{name}\b"):
+        pprender.Settings(**kw)
+    with pytest.raises(pprender.Error, match=rf"\b{name}\b"):
+        pprender.Lidar(**kw)
+
+
+def test_settings_of_another_type_are_refused() -> None:
+    with pytest.raises(pprender.Error, match="settings"):
+        pprender.render(SCENE, pprender.Lidar(resolution=16), Q, settings={"quality": "fast"})
