@@ -82,11 +82,14 @@
 //! (piecewise linear, [`pulse::SampledPulse`]; accumulated on the host in f64 from the
 //! kernel's per-pixel footprints `(r0, a, b)`, see [`gpu::host_profile`]).
 
+pub mod api;
 pub mod geometry;
 pub mod gpu;
 pub mod pulse;
 pub mod tables;
 pub mod twin;
+
+pub use api::{check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE};
 
 /// Speed of light in vacuum (m/s).
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
@@ -102,100 +105,6 @@ pub mod shaders {
     pub fn shade_module() -> String {
         format!("{PULSE}\n{SHADE}")
     }
-}
-
-use crate::error::{Error, Result};
-
-/// Largest image side (resolution x supersampling) accepted.
-pub const MAX_IMAGE_SIDE: usize = 8192;
-
-/// Validate a number of visibility samples per pixel ([`gpu::sample_offsets`]).
-pub fn check_samples(k: usize) -> Result<()> {
-    if k.is_power_of_two() && k <= gpu::MAX_SAMPLES {
-        Ok(())
-    } else {
-        Err(Error::param(
-            "pixel_samples",
-            k,
-            format!(
-                "visibility samples per pixel: 1, 2, 4, 8 or {}",
-                gpu::MAX_SAMPLES
-            ),
-        ))
-    }
-}
-
-/// Validate a sensor set-up (every parameter named with its allowed range).
-pub fn check_sensor(s: &gpu::SensorSetup) -> Result<()> {
-    if s.intensity_only && s.polarization.is_none() {
-        return Err(Error::param(
-            "intensity_only",
-            true,
-            "only with a transmitted polarization (a Stokes vector); without one the output is the Mueller matrix",
-        ));
-    }
-    if s.resolution < 1 || s.resolution > MAX_IMAGE_SIDE {
-        return Err(Error::param(
-            "resolution",
-            s.resolution,
-            format!("an integer in [1, {MAX_IMAGE_SIDE}]"),
-        ));
-    }
-    if s.supersampling < 1 || s.resolution * s.supersampling > MAX_IMAGE_SIDE {
-        return Err(Error::param(
-            "supersampling",
-            s.supersampling,
-            format!("an integer >= 1 with resolution x supersampling <= {MAX_IMAGE_SIDE}"),
-        ));
-    }
-    check_samples(s.samples)?;
-    if s.analytic && s.samples != 1 {
-        return Err(Error::param(
-            "pixel_samples",
-            s.samples,
-            "1 with analytic coverage (coverage=\"analytic\" finds the pixel's triangles \
-             at the pixel centres)",
-        ));
-    }
-    if !(s.bistatic_angle >= 0.0 && s.bistatic_angle < 0.5 * std::f64::consts::PI) {
-        return Err(Error::param(
-            "bistatic_angle",
-            s.bistatic_angle,
-            "radians in [0, pi/2)",
-        ));
-    }
-    if let Some(p) = s.polarization {
-        if !p.iter().all(|x| x.is_finite()) || p[0] <= 0.0 {
-            return Err(Error::param(
-                "polarization",
-                format!("{p:?}"),
-                "a finite Stokes vector with S0 > 0",
-            ));
-        }
-        let dop = (p[1] * p[1] + p[2] * p[2] + p[3] * p[3]).sqrt();
-        if dop > p[0] * (1.0 + 1e-9) {
-            return Err(Error::param(
-                "polarization",
-                format!("{p:?}"),
-                "a physical Stokes vector (sqrt(S1^2 + S2^2 + S3^2) <= S0)",
-            ));
-        }
-    }
-    if !(s.sigma_range > 0.0 && s.sigma_range.is_finite()) {
-        return Err(Error::param(
-            "pulse_fwhm",
-            s.sigma_range,
-            "a positive, finite pulse width",
-        ));
-    }
-    if !(s.bin_width > 0.0 && s.bin_width.is_finite()) {
-        return Err(Error::param(
-            "bin_width",
-            s.bin_width,
-            "a positive, finite length (m)",
-        ));
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -10,7 +10,7 @@
 //! shadow-map rule. Conventions: [`crate::render`].
 
 use super::geometry::{rotate, transmitter_rotation, Mesh, Rot};
-use super::gpu::{Layout, Outputs, Rendered, SensorSetup};
+use super::api::{Layout, Outputs, Rendered, SensorSetup};
 use super::pulse;
 use crate::brdf::table::{BrdfTable, TableFrame};
 use crate::optics::frames::{beam_bases, cross, dot, neg, norm, normalize, Frame, V3};
