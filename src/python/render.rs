@@ -340,11 +340,11 @@ impl PyRenderScene {
 }
 
 /// The `k` visibility samples of a pixel, (k, 2) `(u, v)` in pixel units from its top-left
-/// corner, `v` down the rows (`crate::render::gpu::sample_offsets`).
+/// corner, `v` down the rows (`crate::render::samples::sample_offsets`).
 #[pyfunction]
 fn sample_offsets<'py>(py: Python<'py>, k: usize) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
     crate::render::check_samples(k)?;
-    let v: Vec<Vec<f64>> = crate::render::gpu::sample_offsets(k)
+    let v: Vec<Vec<f64>> = crate::render::samples::sample_offsets(k)
         .into_iter()
         .map(|p| p.to_vec())
         .collect();

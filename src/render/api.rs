@@ -25,7 +25,7 @@ pub struct SensorSetup {
     /// Sub-pixels per output pixel side.
     pub supersampling: usize,
     /// Visibility samples per (sub-)pixel, a power of two in `1..=16`
-    /// ([`crate::render::gpu::sample_offsets`]): the pixel's area is shared among the
+    /// ([`crate::render::samples::sample_offsets`]): the pixel's area is shared among the
     /// triangles its samples see, each shaded once (see `shaders/shade.wgsl`). 1: the pixel
     /// centre alone.
     pub samples: usize,
@@ -195,9 +195,9 @@ impl Layout {
 /// Largest image side (resolution x supersampling) accepted.
 pub const MAX_IMAGE_SIDE: usize = 8192;
 
-/// Validate a number of visibility samples per pixel ([`super::gpu::sample_offsets`]).
+/// Validate a number of visibility samples per pixel ([`super::samples::sample_offsets`]).
 pub fn check_samples(k: usize) -> Result<()> {
-    if k.is_power_of_two() && k <= super::gpu::MAX_SAMPLES {
+    if k.is_power_of_two() && k <= super::samples::MAX_SAMPLES {
         Ok(())
     } else {
         Err(Error::param(
@@ -205,7 +205,7 @@ pub fn check_samples(k: usize) -> Result<()> {
             k,
             format!(
                 "visibility samples per pixel: 1, 2, 4, 8 or {}",
-                super::gpu::MAX_SAMPLES
+                super::samples::MAX_SAMPLES
             ),
         ))
     }

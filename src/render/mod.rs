@@ -20,9 +20,9 @@
 //! Row 0 is the top (`Y = +ext`), column 0 the left (`X = -ext`); pixel `(i, j)` has its
 //! centre at `X = -ext + (j + 1/2) delta`, `Y = ext - (i + 1/2) delta`, `delta = 2 ext / W`.
 //! Visibility is sampled (rasterization) at `K` points of each pixel (`samples`, a power
-//! of two up to 16; [`gpu::sample_offsets`]: one per row and column of the `K x K` grid,
+//! of two up to 16; [`samples::sample_offsets`]: one per row and column of the `K x K` grid,
 //! symmetric about the centre, `K = 1` the centre; `K >= 4` the standard 4x multisample
-//! positions in `K / 4` shifted passes, [`gpu::msaa_samples`]). Each
+//! positions in `K / 4` shifted passes, [`samples::msaa_samples`]). Each
 //! flat surface ([`geometry::Mesh::surfaces`]: faces joined by edges, coplanar, of one
 //! material, flat-shaded; each face of a smooth-shaded mesh is its own) seen by `c` of them
 //! counts for `c / K` of the pixel's area and is shaded once, on the plane of the triangle
@@ -83,9 +83,11 @@
 //! kernel's per-pixel footprints `(r0, a, b)`, see [`gpu::host_profile`]).
 
 pub mod api;
+pub mod downsample;
 pub mod geometry;
 pub mod gpu;
 pub mod pulse;
+pub mod samples;
 pub mod tables;
 pub mod twin;
 

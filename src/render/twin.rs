@@ -28,7 +28,7 @@ pub fn visibility(mesh: &Mesh, rot: &Rot, width: usize, ext: f64) -> Vec<u32> {
 /// Triangle index + 1 seen at the point `(u, v)` of each pixel (pixel units from its
 /// top-left corner, `v` down the rows: `X = -ext + (j + u) delta`, `Y = ext - (i + v)
 /// delta`), row-major `width x width` (0: empty). Twin of `shaders/visibility.wgsl` for
-/// one visibility sample ([`crate::render::gpu::sample_offsets`]).
+/// one visibility sample ([`crate::render::samples::sample_offsets`]).
 pub fn visibility_at(mesh: &Mesh, rot: &Rot, width: usize, ext: f64, uv: [f64; 2]) -> Vec<u32> {
     rasterize(&project(mesh, rot), width, ext, uv)
 }
@@ -1139,7 +1139,7 @@ pub fn render_cpu(
     let edges: Vec<f64> = (0..=nb)
         .map(|k| lay.r_min + k as f64 * sensor.bin_width)
         .collect();
-    let offsets = super::gpu::sample_offsets(sensor.samples);
+    let offsets = super::samples::sample_offsets(sensor.samples);
     let beta = sensor.bistatic_angle;
     let beam = Beam::new(sensor, &lay);
     // per attitude: the rotated vertices, the visibility samples' id maps (in parallel
@@ -1318,14 +1318,14 @@ pub fn render_supersampled(
         let (w, res, n, ch) = (r.width, sensor.resolution, r.n, r.channels);
         if let Some(img) = r.image.as_mut() {
             let mut out = vec![0.0f32; n * res * res * ch];
-            super::gpu::downsample_sum(img, n, w, ss, ch, &mut out);
+            super::downsample::downsample_sum(img, n, w, ss, ch, &mut out);
             *img = out;
         }
         if let Some(rng) = r.range.as_mut() {
             let mut out = vec![0.0f32; n * res * res];
             let mut cov = vec![0.0f32; n * res * res];
             let c0 = r.coverage.take().expect("coverage with the range");
-            super::gpu::downsample_range(rng, &c0, n, w, ss, &mut out, &mut cov);
+            super::downsample::downsample_range(rng, &c0, n, w, ss, &mut out, &mut cov);
             *rng = out;
             r.coverage = Some(cov);
         }
