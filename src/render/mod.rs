@@ -83,12 +83,16 @@
 //! kernel's per-pixel footprints `(r0, a, b)`, see [`gpu::host_profile`]).
 
 pub mod api;
+#[cfg(test)]
+mod compare_gpu_cpu;
 pub mod downsample;
 pub mod geometry;
 pub mod gpu;
 pub mod pulse;
 pub mod samples;
 pub mod tables;
+#[cfg(test)]
+pub(crate) mod test_scenes;
 pub mod twin;
 
 pub use api::{check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE};

@@ -1391,9 +1391,9 @@ mod tests {
     #[test]
     fn table_lookup_as_the_kernel_equals_the_tables_own_evaluation() {
         use crate::brdf::table::BrdfTableOptions;
-        let mat = crate::render::gpu::twin_tests::metal();
-        let mesh = crate::render::gpu::tests::uv_sphere(0.5, 16, 32);
-        let rots = crate::render::gpu::tests::two_attitudes();
+        let mat = crate::render::test_scenes::metal();
+        let mesh = crate::render::test_scenes::uv_sphere(0.5, 16, 32);
+        let rots = crate::render::test_scenes::two_attitudes();
         let all = Outputs {
             image: true,
             range: false,
@@ -1414,7 +1414,7 @@ mod tests {
                 (Some([1.0, 0.0, 0.0, 0.0]), true),
                 (Some([1.0, 0.6, 0.2, -0.7]), true),
             ] {
-                let mut sensor = crate::render::gpu::tests::lambert_sensor(40);
+                let mut sensor = crate::render::test_scenes::lambert_sensor(40);
                 sensor.bistatic_angle = beta;
                 sensor.polarization = pol;
                 sensor.intensity_only = intensity_only;
@@ -1450,7 +1450,7 @@ mod tests {
     /// summed in their order.
     #[test]
     fn an_attitude_renders_the_same_alone_and_in_a_batch() {
-        let mesh = crate::render::gpu::tests::uv_sphere(0.5, 16, 32);
+        let mesh = crate::render::test_scenes::uv_sphere(0.5, 16, 32);
         let q = |a: f64| {
             [
                 (0.5 * a).cos(),
@@ -1472,7 +1472,7 @@ mod tests {
             range: true,
             profile: true,
         };
-        let mut sensor = crate::render::gpu::tests::lambert_sensor(40);
+        let mut sensor = crate::render::test_scenes::lambert_sensor(40);
         sensor.samples = 4;
         sensor.bistatic_angle = 0.2;
         let batch = render_cpu(&mesh, &sensor, &rots, all, &brdf);
@@ -1507,7 +1507,7 @@ mod tests {
     /// it was, and the faces it drops are about half of them.
     #[test]
     fn culling_back_faces_of_closed_meshes_changes_no_pixel() {
-        let closed = crate::render::gpu::tests::uv_sphere(0.5, 24, 48);
+        let closed = crate::render::test_scenes::uv_sphere(0.5, 24, 48);
         assert!(closed.closed);
         let mut open = closed.clone();
         open.closed = false;
