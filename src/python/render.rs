@@ -189,9 +189,9 @@ impl PyRenderScene {
     }
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
-    /// `device = "reference"`: the f64 CPU reference (`twin::render_reference`, exact
+    /// `device = "reference"`: the f64 CPU reference (`cpu::render_reference`, exact
     /// BRDFs, no tables; the table keywords are then unused). `device = "twin"`: the
-    /// kernel's f64 CPU twin with the same tables (`twin::render_tables`).
+    /// kernel's f64 CPU twin with the same tables (`cpu::render_tables`).
     #[pyo3(signature = (rotations, *, resolution, supersampling, samples, bistatic_angle, polarization,
         intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
@@ -284,11 +284,11 @@ impl PyRenderScene {
         };
         let mesh = self.mesh.clone();
         if reference || f64_twin {
-            crate::render::twin::check_cpu_render(&mesh, &sensor, rots.len(), outputs)?;
+            crate::render::cpu::check_cpu_render(&mesh, &sensor, rots.len(), outputs)?;
         }
         let r = py.detach(|| -> crate::Result<_> {
             if reference {
-                let r = crate::render::twin::render_reference(
+                let r = crate::render::cpu::render_reference(
                     &mesh,
                     &sensor,
                     &rots,
@@ -299,7 +299,7 @@ impl PyRenderScene {
             }
             if f64_twin {
                 let (_, tables, _) = self.tables.get_with_tables(bistatic_angle, &opts)?;
-                let r = crate::render::twin::render_tables(&mesh, &sensor, &rots, outputs, &tables);
+                let r = crate::render::cpu::render_tables(&mesh, &sensor, &rots, outputs, &tables);
                 return Ok((r, "f64 twin (CPU, BRDF tables)".to_string()));
             }
             let (tables, _) = self.tables.get_with(bistatic_angle, &opts)?;

@@ -1,5 +1,5 @@
 //! The renderer's request and result types, shared by every backend (the wgpu kernels,
-//! [`crate::render::gpu`], and the f64 CPU renderers, [`crate::render::twin`]): what to
+//! [`crate::render::gpu`], and the f64 CPU renderers, [`crate::render::cpu`]): what to
 //! compute ([`Outputs`]), the validated sensor ([`SensorSetup`], [`check_sensor`]), the
 //! image and profile geometry it implies for a mesh ([`Layout`]) and the arrays a render
 //! returns ([`Rendered`]). Conventions: [`crate::render`].
@@ -32,7 +32,7 @@ pub struct SensorSetup {
     /// Analytic coverage (with `samples == 1`): the pixel's area is shared among the
     /// triangles seen at the centres of its 3x3 neighbourhood by exact polygon clipping in
     /// depth order, each shaded once at the centroid of its visible part
-    /// (`coverage_parts` in `shaders/shade.wgsl`, twin [`crate::render::twin::coverage_parts`]).
+    /// (`coverage_parts` in `shaders/shade.wgsl`, twin [`crate::render::cpu::coverage_parts`]).
     pub analytic: bool,
     pub bistatic_angle: f64,
     /// Transmitted Stokes vector; `None`: full Mueller output.

@@ -10,12 +10,12 @@ use crate::microfacet::Distribution;
 use crate::optics::frames::Frame;
 use crate::optics::fresnel::{Eta, C64};
 use crate::render::api::{Layout, Outputs, Rendered};
+use crate::render::cpu;
 use crate::render::geometry::{Mesh, Rot};
 use crate::render::gpu::{context, render, DeviceChoice, Gpu, GpuTables, PartRef};
 use crate::render::test_scenes::{
     lambert_brdf, lambert_sensor, lambert_tables, metal, sphere_and_plate, two_attitudes, uv_sphere,
 };
-use crate::render::twin;
 
 // ---- Lambertian sphere: kernel, twin and the analytic cross-section ----
 
@@ -38,7 +38,7 @@ fn lambertian_sphere_on_the_device_matches_twin_and_analytic() {
     };
     let g = render(&gpu, &mesh, &tables, &sensor, &rot, out).unwrap();
     let brdf = lambert_brdf(rho);
-    let c = twin::render_cpu(&mesh, &sensor, &rot, out, &brdf);
+    let c = cpu::render_cpu(&mesh, &sensor, &rot, out, &brdf);
     let analytic = 8.0 / 3.0 * std::f64::consts::PI * a * a * rho;
     let (tg, tc) = (g.total[0], c.total[0]);
     eprintln!("gpu {tg} cpu {tc} analytic {analytic}");
@@ -108,10 +108,10 @@ fn kernel_twin_core(
     let mut sensor = lambert_sensor(64);
     sensor.bistatic_angle = beta;
     let g = render(gpu, mesh, &tables, &sensor, rot, out).unwrap();
-    let by_table = twin::Tables(std::slice::from_ref(table));
+    let by_table = cpu::Tables(std::slice::from_ref(table));
     let by_core = |_m: usize, wi: [f64; 3], wo: [f64; 3]| crate::brdf::eval(mat, wi, wo, Frame::Sp);
-    let t = twin::render_cpu(mesh, &sensor, rot, out, &by_table);
-    let c = twin::render_cpu(mesh, &sensor, rot, out, &by_core);
+    let t = cpu::render_cpu(mesh, &sensor, rot, out, &by_table);
+    let c = cpu::render_cpu(mesh, &sensor, rot, out, &by_core);
     (g, t, c)
 }
 
@@ -337,21 +337,21 @@ fn bistatic_shadows_kernel_matches_twin() {
         let mut sensor = lambert_sensor(128);
         sensor.bistatic_angle = beta;
         let g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
-        let t = twin::render_cpu(&mesh, &sensor, &rots, out, &brdf);
+        let t = cpu::render_cpu(&mesh, &sensor, &rots, out, &brdf);
         let lay = Layout::new(&mesh, &sensor);
         let w = lay.width;
         let (gi, ti) = (g.image.as_ref().unwrap(), t.image.as_ref().unwrap());
         let (gr, tr) = (g.range.as_ref().unwrap(), t.range.as_ref().unwrap());
         for (a, rot) in rots.iter().enumerate() {
             // shadowed pixels by the twin's own functions (lit by cos, yet in shadow)
-            let ids = twin::visibility(&mesh, rot, w, lay.ext);
-            let view = twin::TransmitterView::new(&mesh, rot, beta);
+            let ids = cpu::visibility(&mesh, rot, w, lay.ext);
+            let view = cpu::TransmitterView::new(&mesh, rot, beta);
             let mut n_shadow = 0;
             for (k, &id) in ids.iter().enumerate() {
                 if id == 0 {
                     continue;
                 }
-                let s = twin::shade_pixel(
+                let s = cpu::shade_pixel(
                     &mesh,
                     rot,
                     id as usize - 1,
@@ -362,7 +362,7 @@ fn bistatic_shadows_kernel_matches_twin() {
                     &brdf,
                 )
                 .unwrap();
-                if s.values[0] > 0.0 && twin::shadowed(&view, id as usize - 1, s.point) {
+                if s.values[0] > 0.0 && cpu::shadowed(&view, id as usize - 1, s.point) {
                     n_shadow += 1;
                 }
             }
@@ -454,7 +454,7 @@ fn samples_kernel_matches_twin() {
         sensor.samples = k;
         sensor.bistatic_angle = beta;
         let g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
-        let t = twin::render_cpu(&mesh, &sensor, &rots, out, &brdf);
+        let t = cpu::render_cpu(&mesh, &sensor, &rots, out, &brdf);
         let lay = Layout::new(&mesh, &sensor);
         let pix_max = 4.0 * rho * lay.pix * lay.pix;
         let (gi, ti) = (g.image.as_ref().unwrap(), t.image.as_ref().unwrap());
@@ -568,7 +568,7 @@ fn analytic_kernel_matches_twin() {
         sensor.analytic = true;
         sensor.bistatic_angle = beta;
         let g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
-        let t = twin::render_cpu(&mesh, &sensor, &rots, out, &brdf);
+        let t = cpu::render_cpu(&mesh, &sensor, &rots, out, &brdf);
         let lay = Layout::new(&mesh, &sensor);
         let pix_max = 4.0 * rho * lay.pix * lay.pix;
         let (gi, ti) = (g.image.as_ref().unwrap(), t.image.as_ref().unwrap());
@@ -603,14 +603,14 @@ fn analytic_kernel_matches_twin() {
             worst_r = worst_r.max(er);
         }
         // pixels where the candidate search overflows (the centre-sample fallback)
-        let ids = twin::visibility(&mesh, &rots[0], lay.width, lay.ext);
-        let vertices = twin::rotate_vertices(&mesh, &rots[0]);
+        let ids = cpu::visibility(&mesh, &rots[0], lay.width, lay.ext);
+        let vertices = cpu::rotate_vertices(&mesh, &rots[0]);
         for p in 0..lay.width * lay.width {
             let (row, col) = (p / lay.width, p % lay.width);
             let w = lay.width;
-            let (seeds, _) = twin::analytic_seeds(&ids, w, row, col);
+            let (seeds, _) = cpu::analytic_seeds(&ids, w, row, col);
             if !seeds.is_empty()
-                && twin::coverage_parts(&mesh, &vertices, &lay, row, col, &seeds).is_none()
+                && cpu::coverage_parts(&mesh, &vertices, &lay, row, col, &seeds).is_none()
             {
                 n_fallback += 1;
             }

@@ -50,7 +50,7 @@
 //! rim of a thin plate edge-on to the transmitter) can be missed, which lets light leak
 //! within a texel of a shadow's edge or through a thin shadow; occluders within
 //! `1e-5 ext` of `p` in depth are ignored. Details at the top of `shaders/shade.wgsl`;
-//! the CPU twin ([`twin::shadowed`]) casts the ray toward `wi` exactly.
+//! the CPU twin ([`cpu::shadowed`]) casts the ray toward `wi` exactly.
 //!
 //! **Range.** The one-way range of a surface point `p` relative to the body origin is
 //! `r = -p . (wi + wo) / 2` (half the extra round-trip path; `r = -Z` monostatic): positive
@@ -85,6 +85,7 @@
 pub mod api;
 #[cfg(test)]
 mod compare_gpu_cpu;
+pub mod cpu;
 pub mod downsample;
 pub mod geometry;
 pub mod gpu;
@@ -93,7 +94,6 @@ pub mod samples;
 pub mod tables;
 #[cfg(test)]
 pub(crate) mod test_scenes;
-pub mod twin;
 
 pub use api::{check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE};
 
