@@ -4,10 +4,11 @@
 use super::brdf::PyMaterial;
 use crate::brdf::table::{BrdfTableOptions, PartOptions};
 use crate::brdf::Material;
-use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
 use crate::render::api::{Outputs, SensorSetup};
+use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
 use crate::render::gpu::{self, DeviceChoice};
 use crate::render::pulse::SampledPulse;
+use crate::render::request::{self, Backend};
 use crate::render::tables::SceneTables;
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
@@ -255,13 +256,7 @@ impl PyRenderScene {
             })
             .collect();
         check_rotations(&rots)?;
-        let reference = device == "reference";
-        let f64_twin = device == "twin";
-        let choice = if reference || f64_twin {
-            DeviceChoice::parse("auto")?
-        } else {
-            DeviceChoice::parse(device)?
-        };
+        let backend = Backend::parse(device)?;
         let sensor = SensorSetup {
             resolution,
             supersampling,
@@ -283,31 +278,9 @@ impl PyRenderScene {
             profile,
         };
         let mesh = self.mesh.clone();
-        if reference || f64_twin {
-            crate::render::cpu::check_cpu_render(&mesh, &sensor, rots.len(), outputs)?;
-        }
-        let r = py.detach(|| -> crate::Result<_> {
-            if reference {
-                let r = crate::render::cpu::render_reference(
-                    &mesh,
-                    &sensor,
-                    &rots,
-                    outputs,
-                    &self.tables.materials,
-                );
-                return Ok((r, "reference (f64 CPU, exact BRDFs)".to_string()));
-            }
-            if f64_twin {
-                let (_, tables, _) = self.tables.get_with_tables(bistatic_angle, &opts)?;
-                let r = crate::render::cpu::render_tables(&mesh, &sensor, &rots, outputs, &tables);
-                return Ok((r, "f64 twin (CPU, BRDF tables)".to_string()));
-            }
-            let (tables, _) = self.tables.get_with(bistatic_angle, &opts)?;
-            let g = gpu::context(choice)?;
-            let r = gpu::render(&g, &mesh, &tables, &sensor, &rots, outputs)?;
-            Ok((r, g.info.name.clone()))
+        let (r, dev_name) = py.detach(|| {
+            request::render(&mesh, &self.tables, &opts, &sensor, &rots, outputs, backend)
         })?;
-        let (r, dev_name) = r;
         let d = PyDict::new(py);
         let (n, h, w, c) = (r.n, r.height, r.width, r.channels);
         let tot = Array2::from_shape_vec((n, c), r.total).expect("shape");

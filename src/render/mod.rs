@@ -1,6 +1,15 @@
 //! The lidar renderer: Mueller/Stokes images, range maps and range-resolved pulse profiles
 //! of a mesh under a batch of attitudes, on wgpu (a GPU, or Mesa's lavapipe on the CPU).
 //!
+//! **Where things are.** [`api`]: the request and result types and the sensor's
+//! validation; [`request`]: one entry for every backend ([`request::Backend`],
+//! [`request::render`]), which the Python binding calls; [`gpu`]: the host side of the wgpu
+//! kernels (`shaders/*.wgsl`, [`shaders`]); [`cpu`]: the f64 CPU renderers (the kernels'
+//! twins and the exact reference); [`samples`] and [`downsample`]: the pixel's sample
+//! pattern and the supersampling reduction both backends share; [`geometry`]: meshes and
+//! attitudes; [`pulse`]: pulse shapes and bin weights; [`tables`]: a scene's material
+//! tables, cached per bistatic angle. The GPU-vs-CPU tests are in `compare_gpu_cpu.rs`.
+//!
 //! # Conventions (the one place they are written down)
 //!
 //! **Units.** Lengths in metres, times in seconds, angles in radians, cross-sections in m^2.
@@ -90,12 +99,15 @@ pub mod downsample;
 pub mod geometry;
 pub mod gpu;
 pub mod pulse;
+pub mod request;
 pub mod samples;
 pub mod tables;
 #[cfg(test)]
 pub(crate) mod test_scenes;
 
-pub use api::{check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE};
+pub use api::{
+    check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE,
+};
 
 /// Speed of light in vacuum (m/s).
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
