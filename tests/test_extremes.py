@@ -828,7 +828,7 @@ def test_render_extremes_against_the_f64_reference(name: str, geometry: str, brd
     margin of 4, SHADER_PART_MARGIN, so quanta are 4 times larger), against quality="reference" (exact
     f64 BRDF per pixel, no tables). Totals within RENDER_RTOL relative, plus 4 quanta of
     the fixed-point accumulator per pixel hit (a quantum is 2^-40 of the largest pixel
-    value the tables allow, render/gpu.rs); pixels that both renderers hit at the same
+    value the tables allow, render/gpu/plan.rs); pixels that both renderers hit at the same
     depth (silhouette pixels can hit different facets), where the reference is above 1e3
     quanta, within RENDER_RTOL = 1e-4 of M00 (the default tables' documented interpolation
     error, docs/render-table.md); Mueller images physical within F32_PHYS_TOL = 1e-6 of
@@ -862,7 +862,7 @@ def test_render_extremes_against_the_f64_reference(name: str, geometry: str, brd
     assert_physical(g.cross_section, tol=F32_PHYS_TOL, what=(name, geometry))
     worst_ev = assert_physical(g.mueller, tol=F32_PHYS_TOL, what=(name, geometry))
     # the fixed-point accumulator's quantum: 2^-40 of the largest pixel value the tables
-    # allow, 4 pi pix^2 max M00 (render/gpu.rs); the material's M00 peaks at normal
+    # allow, 4 pi pix^2 max M00 (render/gpu/plan.rs); the material's M00 peaks at normal
     # backscatter (D(h = n)) for all of these
     m00_max = float(pprender.brdf(mat, [0, 0, 1.0], [0, 0, 1.0])[0, 0])
     quantum = 2.0**-40 * 4 * math.pi * g.pixel_size**2 * m00_max * (4 if brdf == "shader" else 1)

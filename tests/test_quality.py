@@ -1,7 +1,7 @@
 """The quality dial (``Lidar(quality=..., table=...)``) and the f64 reference renderer.
 
 The reference (``quality="reference"``) evaluates every pixel's BRDF with the f64 core and
-casts pixel-centre rays exactly (src/render/twin.rs); it shares no table, f32 arithmetic or
+casts pixel-centre rays exactly (src/render/cpu/); it shares no table, f32 arithmetic or
 rasterization with the GPU path, so agreement is a check of both.
 """
 

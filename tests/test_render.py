@@ -330,7 +330,7 @@ def test_profile_total_and_image_agree_for_mixed_materials():
 
 def test_fixed_point_sums_keep_a_dim_material_next_to_a_glint():
     # The profile and total are 64-bit fixed-point sums whose quantum is 2^-40 of the
-    # largest value any pixel could take (src/render/gpu.rs). A near-mirror (alpha 1e-3:
+    # largest value any pixel could take (src/render/gpu/plan.rs). A near-mirror (alpha 1e-3:
     # tabulated M00 ~ 1e5) next to a diffuse paint makes that bound ~1e6 times a paint
     # pixel; round-to-nearest keeps the profile's sum within 1e-6 of the total (measured
     # 1.1e-7; 1.8e-5 at alpha 1e-4, which is documented), and the image (f32 per pixel,

@@ -1,6 +1,6 @@
 """Sampled pulse shapes (``Lidar(pulse_samples=..., pulse_sample_spacing=...)``).
 
-The sampled pulse's profile is accumulated on the host in f64 (src/render/gpu.rs,
+The sampled pulse's profile is accumulated on the host in f64 (src/render/gpu/readback.rs,
 ``host_profile``) from the kernel's per-pixel range footprints. The references here are
 independent of that code: a tilted Lambertian plate (flat range density over W sin t)
 convolved in NumPy with the piecewise-linear pulse (its CDF by fine cumulative
@@ -98,7 +98,7 @@ def test_finely_sampled_gaussian_converges_to_the_gaussian_as_dt_squared():
     q = np.array([[1.0, 0, 0, 0]])
     # one visibility sample per pixel: with more, a pixel that sees several triangles has one
     # footprint per triangle on the device but a single merged one on the host's sampled
-    # path (src/render/gpu.rs, host_profile), which would mask the dt^2 convergence here
+    # path (src/render/gpu/readback.rs, host_profile), which would mask the dt^2 convergence here
     ref = pprender.render(scene, pprender.Lidar(resolution=96, pixel_samples=1), q, outputs=("profile",))
     pa = ref.profile[0, :, 0, 0]
     errs = []

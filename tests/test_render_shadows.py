@@ -18,7 +18,8 @@ antenna, thinner than a texel of the transmitter's map (a documented limit).
 """
 # The shadow rule is checked at pixel centres (one visibility sample, as the embree rays
 # here); with more samples a pixel's shaded points are the means of its samples, checked
-# against the f64 twin, shadows included, by samples_kernel_matches_twin (src/render/gpu.rs).
+# against the f64 twin, shadows included, by samples_kernel_matches_twin
+# (src/render/compare_gpu_cpu.rs).
 
 
 from __future__ import annotations

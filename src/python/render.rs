@@ -4,10 +4,11 @@
 use super::brdf::PyMaterial;
 use crate::brdf::table::{BrdfTableOptions, PartOptions};
 use crate::brdf::Material;
-use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
 use crate::render::api::{Outputs, SensorSetup};
+use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
 use crate::render::gpu::{self, DeviceChoice};
 use crate::render::pulse::SampledPulse;
+use crate::render::request::{self, Backend};
 use crate::render::tables::SceneTables;
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
@@ -189,9 +190,9 @@ impl PyRenderScene {
     }
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
-    /// `device = "reference"`: the f64 CPU reference (`twin::render_reference`, exact
+    /// `device = "reference"`: the f64 CPU reference (`cpu::render_reference`, exact
     /// BRDFs, no tables; the table keywords are then unused). `device = "twin"`: the
-    /// kernel's f64 CPU twin with the same tables (`twin::render_tables`).
+    /// kernel's f64 CPU twin with the same tables (`cpu::render_tables`).
     #[pyo3(signature = (rotations, *, resolution, supersampling, samples, bistatic_angle, polarization,
         intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
@@ -255,13 +256,7 @@ impl PyRenderScene {
             })
             .collect();
         check_rotations(&rots)?;
-        let reference = device == "reference";
-        let f64_twin = device == "twin";
-        let choice = if reference || f64_twin {
-            DeviceChoice::parse("auto")?
-        } else {
-            DeviceChoice::parse(device)?
-        };
+        let backend = Backend::parse(device)?;
         let sensor = SensorSetup {
             resolution,
             supersampling,
@@ -283,31 +278,9 @@ impl PyRenderScene {
             profile,
         };
         let mesh = self.mesh.clone();
-        if reference || f64_twin {
-            crate::render::twin::check_cpu_render(&mesh, &sensor, rots.len(), outputs)?;
-        }
-        let r = py.detach(|| -> crate::Result<_> {
-            if reference {
-                let r = crate::render::twin::render_reference(
-                    &mesh,
-                    &sensor,
-                    &rots,
-                    outputs,
-                    &self.tables.materials,
-                );
-                return Ok((r, "reference (f64 CPU, exact BRDFs)".to_string()));
-            }
-            if f64_twin {
-                let (_, tables, _) = self.tables.get_with_tables(bistatic_angle, &opts)?;
-                let r = crate::render::twin::render_tables(&mesh, &sensor, &rots, outputs, &tables);
-                return Ok((r, "f64 twin (CPU, BRDF tables)".to_string()));
-            }
-            let (tables, _) = self.tables.get_with(bistatic_angle, &opts)?;
-            let g = gpu::context(choice)?;
-            let r = gpu::render(&g, &mesh, &tables, &sensor, &rots, outputs)?;
-            Ok((r, g.info.name.clone()))
+        let (r, dev_name) = py.detach(|| {
+            request::render(&mesh, &self.tables, &opts, &sensor, &rots, outputs, backend)
         })?;
-        let (r, dev_name) = r;
         let d = PyDict::new(py);
         let (n, h, w, c) = (r.n, r.height, r.width, r.channels);
         let tot = Array2::from_shape_vec((n, c), r.total).expect("shape");
@@ -340,11 +313,11 @@ impl PyRenderScene {
 }
 
 /// The `k` visibility samples of a pixel, (k, 2) `(u, v)` in pixel units from its top-left
-/// corner, `v` down the rows (`crate::render::gpu::sample_offsets`).
+/// corner, `v` down the rows (`crate::render::samples::sample_offsets`).
 #[pyfunction]
 fn sample_offsets<'py>(py: Python<'py>, k: usize) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
     crate::render::check_samples(k)?;
-    let v: Vec<Vec<f64>> = crate::render::gpu::sample_offsets(k)
+    let v: Vec<Vec<f64>> = crate::render::samples::sample_offsets(k)
         .into_iter()
         .map(|p| p.to_vec())
         .collect();

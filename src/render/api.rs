@@ -1,5 +1,5 @@
 //! The renderer's request and result types, shared by every backend (the wgpu kernels,
-//! [`crate::render::gpu`], and the f64 CPU renderers, [`crate::render::twin`]): what to
+//! [`crate::render::gpu`], and the f64 CPU renderers, [`crate::render::cpu`]): what to
 //! compute ([`Outputs`]), the validated sensor ([`SensorSetup`], [`check_sensor`]), the
 //! image and profile geometry it implies for a mesh ([`Layout`]) and the arrays a render
 //! returns ([`Rendered`]). Conventions: [`crate::render`].
@@ -25,14 +25,14 @@ pub struct SensorSetup {
     /// Sub-pixels per output pixel side.
     pub supersampling: usize,
     /// Visibility samples per (sub-)pixel, a power of two in `1..=16`
-    /// ([`crate::render::gpu::sample_offsets`]): the pixel's area is shared among the
+    /// ([`crate::render::samples::sample_offsets`]): the pixel's area is shared among the
     /// triangles its samples see, each shaded once (see `shaders/shade.wgsl`). 1: the pixel
     /// centre alone.
     pub samples: usize,
     /// Analytic coverage (with `samples == 1`): the pixel's area is shared among the
     /// triangles seen at the centres of its 3x3 neighbourhood by exact polygon clipping in
     /// depth order, each shaded once at the centroid of its visible part
-    /// (`coverage_parts` in `shaders/shade.wgsl`, twin [`crate::render::twin::coverage_parts`]).
+    /// (`coverage_parts` in `shaders/shade.wgsl`, twin [`crate::render::cpu::coverage_parts`]).
     pub analytic: bool,
     pub bistatic_angle: f64,
     /// Transmitted Stokes vector; `None`: full Mueller output.
@@ -195,9 +195,9 @@ impl Layout {
 /// Largest image side (resolution x supersampling) accepted.
 pub const MAX_IMAGE_SIDE: usize = 8192;
 
-/// Validate a number of visibility samples per pixel ([`super::gpu::sample_offsets`]).
+/// Validate a number of visibility samples per pixel ([`super::samples::sample_offsets`]).
 pub fn check_samples(k: usize) -> Result<()> {
-    if k.is_power_of_two() && k <= super::gpu::MAX_SAMPLES {
+    if k.is_power_of_two() && k <= super::samples::MAX_SAMPLES {
         Ok(())
     } else {
         Err(Error::param(
@@ -205,7 +205,7 @@ pub fn check_samples(k: usize) -> Result<()> {
             k,
             format!(
                 "visibility samples per pixel: 1, 2, 4, 8 or {}",
-                super::gpu::MAX_SAMPLES
+                super::samples::MAX_SAMPLES
             ),
         ))
     }

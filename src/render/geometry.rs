@@ -224,7 +224,7 @@ impl Mesh {
     /// directional illumination and orthographic view, the Mueller BRDF is the same at
     /// every point and the range is linear, so the samples of a pixel that see different
     /// faces of one surface are shaded as one part (`shaders/shade.wgsl`,
-    /// [`crate::render::twin::sampled_parts`]): a finely tessellated panel costs what one
+    /// [`crate::render::cpu::sampled_parts`]): a finely tessellated panel costs what one
     /// large face does.
     pub fn surfaces(&self) -> &[u32] {
         use crate::optics::frames::{cross, dot, norm};

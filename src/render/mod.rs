@@ -1,6 +1,15 @@
 //! The lidar renderer: Mueller/Stokes images, range maps and range-resolved pulse profiles
 //! of a mesh under a batch of attitudes, on wgpu (a GPU, or Mesa's lavapipe on the CPU).
 //!
+//! **Where things are.** [`api`]: the request and result types and the sensor's
+//! validation; [`request`]: one entry for every backend ([`request::Backend`],
+//! [`request::render`]), which the Python binding calls; [`gpu`]: the host side of the wgpu
+//! kernels (`shaders/*.wgsl`, [`shaders`]); [`cpu`]: the f64 CPU renderers (the kernels'
+//! twins and the exact reference); [`samples`] and [`downsample`]: the pixel's sample
+//! pattern and the supersampling reduction both backends share; [`geometry`]: meshes and
+//! attitudes; [`pulse`]: pulse shapes and bin weights; [`tables`]: a scene's material
+//! tables, cached per bistatic angle. The GPU-vs-CPU tests are in `compare_gpu_cpu.rs`.
+//!
 //! # Conventions (the one place they are written down)
 //!
 //! **Units.** Lengths in metres, times in seconds, angles in radians, cross-sections in m^2.
@@ -20,9 +29,9 @@
 //! Row 0 is the top (`Y = +ext`), column 0 the left (`X = -ext`); pixel `(i, j)` has its
 //! centre at `X = -ext + (j + 1/2) delta`, `Y = ext - (i + 1/2) delta`, `delta = 2 ext / W`.
 //! Visibility is sampled (rasterization) at `K` points of each pixel (`samples`, a power
-//! of two up to 16; [`gpu::sample_offsets`]: one per row and column of the `K x K` grid,
+//! of two up to 16; [`samples::sample_offsets`]: one per row and column of the `K x K` grid,
 //! symmetric about the centre, `K = 1` the centre; `K >= 4` the standard 4x multisample
-//! positions in `K / 4` shifted passes, [`gpu::msaa_samples`]). Each
+//! positions in `K / 4` shifted passes, [`samples::msaa_samples`]). Each
 //! flat surface ([`geometry::Mesh::surfaces`]: faces joined by edges, coplanar, of one
 //! material, flat-shaded; each face of a smooth-shaded mesh is its own) seen by `c` of them
 //! counts for `c / K` of the pixel's area and is shaded once, on the plane of the triangle
@@ -50,7 +59,7 @@
 //! rim of a thin plate edge-on to the transmitter) can be missed, which lets light leak
 //! within a texel of a shadow's edge or through a thin shadow; occluders within
 //! `1e-5 ext` of `p` in depth are ignored. Details at the top of `shaders/shade.wgsl`;
-//! the CPU twin ([`twin::shadowed`]) casts the ray toward `wi` exactly.
+//! the CPU twin ([`cpu::shadowed`]) casts the ray toward `wi` exactly.
 //!
 //! **Range.** The one-way range of a surface point `p` relative to the body origin is
 //! `r = -p . (wi + wo) / 2` (half the extra round-trip path; `r = -Z` monostatic): positive
@@ -83,13 +92,22 @@
 //! kernel's per-pixel footprints `(r0, a, b)`, see [`gpu::host_profile`]).
 
 pub mod api;
+#[cfg(test)]
+mod compare_gpu_cpu;
+pub mod cpu;
+pub mod downsample;
 pub mod geometry;
 pub mod gpu;
 pub mod pulse;
+pub mod request;
+pub mod samples;
 pub mod tables;
-pub mod twin;
+#[cfg(test)]
+pub(crate) mod test_scenes;
 
-pub use api::{check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE};
+pub use api::{
+    check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE,
+};
 
 /// Speed of light in vacuum (m/s).
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;

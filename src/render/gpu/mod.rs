@@ -1,0 +1,144 @@
+//! The wgpu side of the renderer: adapter choice, pipelines, chunked batch rendering.
+//!
+//! Per chunk of attitudes: one render pass per attitude and visibility sample rasterizes
+//! triangle indices into a layer of an R32Uint texture array (`shaders/visibility.wgsl`;
+//! with `K >= 4` samples, one 4x multisampled render pass per attitude into fixed tiles,
+//! gathered by `shaders/gather.wgsl` into a buffer: `targets::MsaaTiles`), then one compute
+//! dispatch (`shaders/shade.wgsl`, specialized by override constants to the requested
+//! outputs) shades every pixel and accumulates the profile and total in 64-bit fixed point.
+//! Only the requested buffers are created and read back. Bistatic (`beta > 0`) the same
+//! raster pipeline first draws each attitude from the transmitter too (rotations
+//! [`transmitter_rotation`](crate::render::geometry::transmitter_rotation)) into a second
+//! texture array, which the shade kernel (compiled with `SHADOWS`) reads to test cast
+//! shadows; monostatic neither the pass nor the test exists. Conventions: [`crate::render`].
+//!
+//! The files, in the order a render runs through them:
+//! - `device.rs`: the adapter and device ([`DeviceChoice`], [`context`], [`Gpu`]) and the
+//!   error scopes around a render;
+//! - `plan.rs`: what the kernel computes ([`KernelOutputs`]), the device-limit checks, the
+//!   chunk size and fixed-point scale;
+//! - `pack.rs`: every byte layout the kernels read (geometry, [`GpuTables`],
+//!   [`ShadeParams`] and the other uniform blocks);
+//! - `passes.rs` and `targets.rs`: the pipelines, the raster targets, the bind groups and
+//!   the passes encoded per chunk;
+//! - `readback.rs`: the output buffers, mapping, fixed-point decoding, the sampled pulse's
+//!   host profile ([`host_profile`]) and downsampling.
+//!
+//! The sample pattern ([`crate::render::samples`]) and the downsampling
+//! ([`crate::render::downsample`]) are shared with the CPU renderers; the comparisons of
+//! this backend with them are in `src/render/compare_gpu_cpu.rs`.
+
+mod device;
+mod pack;
+mod passes;
+mod plan;
+mod readback;
+mod targets;
+
+pub use device::{context, DeviceChoice, DeviceInfo, Gpu};
+pub use pack::{
+    GpuTables, InKernel, PartRef, ShadeParams, HEADER_WORDS, MAX_PARTS, SHADER_PART,
+    SHADER_PART_MARGIN,
+};
+pub use plan::{transmitter_map_width, KernelOutputs};
+pub use readback::host_profile;
+
+use super::api::{Layout, Outputs, Rendered, SensorSetup};
+use super::geometry::{Mesh, Rot};
+use crate::error::Result;
+use passes::{encode_chunk, ChunkBindings, SceneBuffers, ShadeKey};
+use plan::Plan;
+use readback::{HostOutputs, ResultBuffers};
+use targets::Targets;
+
+/// Render a batch of attitudes (rotations) of `mesh` with the packed tables.
+pub fn render(
+    gpu: &Gpu,
+    mesh: &Mesh,
+    tables: &GpuTables,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+) -> Result<Rendered> {
+    let lay = Layout::new(mesh, sensor);
+    lay.check_bins(sensor)?;
+    plan::check_image(gpu, &lay, sensor, mesh.faces.len())?;
+    let geometry = pack::geometry(mesh, sensor.analytic);
+    let plan = Plan::new(
+        gpu,
+        &lay,
+        sensor,
+        tables,
+        outputs,
+        &geometry,
+        mesh.faces.len(),
+    )?;
+    let params = ShadeParams::new(mesh, &lay, sensor, plan.fix_scale, plan.tx_width);
+    let fix_scale = params.fix_scale as f64; // what the kernel uses
+    let mut r = device::error_scoped(&gpu.device, || {
+        render_chunks(
+            gpu, mesh, &geometry, tables, &params, fix_scale, &plan, &lay, sensor, rotations,
+            outputs,
+        )
+    })?;
+    r.n = rotations.len();
+    Ok(r)
+}
+
+/// The batch in chunks of [`Plan::chunk`] attitudes: the scene uploaded and the chunk's
+/// buffers and targets made once, then per chunk its bind groups, its passes encoded
+/// between clearing the sums and copying the results out, submitted, and read back.
+#[allow(clippy::too_many_arguments)]
+fn render_chunks(
+    gpu: &Gpu,
+    mesh: &Mesh,
+    geometry: &[[f32; 4]],
+    tables: &GpuTables,
+    params: &ShadeParams,
+    fix_scale: f64,
+    plan: &Plan,
+    lay: &Layout,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+) -> Result<Rendered> {
+    let dev = &gpu.device;
+    let n = rotations.len();
+    let key = ShadeKey::new(plan, sensor, tables);
+    let pipeline = gpu.pipelines.shade_pipeline(dev, key)?;
+    let scene = SceneBuffers::new(dev, geometry, tables, params, lay, sensor.samples);
+    let c = plan.chunk.min(n);
+    let results = ResultBuffers::new(dev, plan, lay, sensor, c, fix_scale);
+    let targets = Targets::new(
+        gpu,
+        lay.width,
+        sensor.samples,
+        scene.passes(),
+        c,
+        key.shadows.then_some(params.tx_width),
+    );
+    let transmitter = key.shadows.then_some(sensor.bistatic_angle);
+    let mut host = HostOutputs::new(outputs, n, sensor.resolution, plan.channels, lay.n_bins);
+    for start in (0..n).step_by(c) {
+        let m = (n - start).min(c);
+        let rots = &rotations[start..start + m];
+        let bindings = ChunkBindings::new(gpu, &scene, &targets, &results, rots, transmitter);
+        let mut enc = dev.create_command_encoder(&Default::default());
+        results.clear(&mut enc);
+        encode_chunk(
+            &mut enc,
+            gpu,
+            &targets,
+            &bindings,
+            &pipeline,
+            m,
+            params.n_tri,
+            mesh.closed,
+            lay.width,
+        );
+        results.copy_for_readback(&mut enc, m);
+        gpu.queue.submit([enc.finish()]);
+        results.read_chunk(dev, start, m, &mut host)?;
+    }
+    Ok(host.into_rendered(plan.channels, lay, sensor))
+}

@@ -1,0 +1,658 @@
+//! The GPU passes: the pipelines a device compiles once ([`Pipelines`]; the shade kernel
+//! per [`ShadeKey`] of override constants), what a render uploads once ([`SceneBuffers`]),
+//! and per chunk of attitudes the bind groups ([`ChunkBindings`]) and the encoded passes
+//! ([`encode_chunk`]): the receiver's visibility raster into its targets
+//! ([`super::targets`]; with `K >= 4` samples gathered from multisampled tiles), bistatic
+//! the transmitter's, then the shade dispatch.
+
+use super::device::{device_error, Gpu};
+use super::pack::{raster_shifts, raster_transform, GpuTables, ShadeParams, VisParams};
+use super::plan::Plan;
+use super::readback::ResultBuffers;
+use super::targets::{IdTarget, Targets};
+use crate::error::Result;
+use crate::render::api::{Layout, SensorSetup};
+use crate::render::geometry::{gpu_rotation, transmitter_rotation, Rot};
+use crate::render::samples::MSAA;
+use crate::render::shaders;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use wgpu::util::DeviceExt;
+
+/// The pipelines of one device.
+pub(super) struct Pipelines {
+    vis_layout: wgpu::BindGroupLayout,
+    vis_pipeline: [wgpu::RenderPipeline; 2],
+    /// The same at [`MSAA`] samples per texel, ids as `f32` (`fs_float`), into the tiles
+    /// of `K >= 4` ([`super::targets::MsaaTiles`]), and the kernel that gathers them
+    /// (`gather.wgsl`).
+    vis_pipeline_msaa: [wgpu::RenderPipeline; 2],
+    pub(super) gather_layout: wgpu::BindGroupLayout,
+    gather_pipeline: wgpu::ComputePipeline,
+    /// Placeholders for the shade kernel's id bindings that a request does not use: a
+    /// 1 x 1 layer array (binding 0 with `K >= 4`) and a 16-byte buffer (binding 10 with
+    /// `K < 4`).
+    dummy_ids: wgpu::TextureView,
+    dummy_buffer: wgpu::Buffer,
+    shade_layout: wgpu::BindGroupLayout,
+    shade_pipeline_layout: wgpu::PipelineLayout,
+    shade_module: wgpu::ShaderModule,
+    shade_pipelines: Mutex<HashMap<ShadeKey, Arc<wgpu::ComputePipeline>>>,
+}
+
+/// Override constants of the shade kernel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(super) struct ShadeKey {
+    channels: u32,
+    image: bool,
+    range: bool,
+    profile: bool,
+    total: bool,
+    footprint: bool,
+    /// Transmitter cast shadows (bistatic only).
+    pub(super) shadows: bool,
+    /// The Mueller elements looked up ([`SensorSetup::element_mask`]).
+    elements: u32,
+    /// Visibility samples per pixel.
+    samples: u32,
+    /// Analytic coverage ([`SensorSetup::analytic`]).
+    analytic: bool,
+    /// Some material's terms are evaluated in the kernel ([`GpuTables::in_shader`]).
+    in_shader: bool,
+}
+
+impl ShadeKey {
+    /// The kernel a render needs: its outputs ([`Plan::kern`]) and the sensor's options.
+    pub(super) fn new(plan: &Plan, sensor: &SensorSetup, tables: &GpuTables) -> Self {
+        let kern = plan.kern;
+        ShadeKey {
+            channels: plan.channels as u32,
+            image: kern.image,
+            range: kern.range,
+            profile: kern.profile,
+            // With the profile on the device the total is its sum, taken exactly on the host
+            // from the same fixed-point words (the bins cover every pixel's footprint and pulse
+            // support, see Layout): the kernel's workgroup reduction is then compiled out.
+            total: kern.total(),
+            footprint: kern.footprint,
+            shadows: sensor.bistatic_angle > 0.0,
+            elements: sensor.element_mask(),
+            samples: sensor.samples as u32,
+            analytic: sensor.analytic,
+            in_shader: tables.in_shader,
+        }
+    }
+}
+
+impl Pipelines {
+    /// Compile the visibility, gather and shade pipelines on `device` (the shade kernel's
+    /// specializations on demand, [`Pipelines::shade_pipeline`]).
+    pub(super) fn new(device: &wgpu::Device) -> Result<Self> {
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let storage =
+            |binding: u32, read_only: bool, vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: vis,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            };
+        let uniform = |binding: u32, vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: vis,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let texture = |binding: u32,
+                       sample_type: wgpu::TextureSampleType,
+                       view_dimension: wgpu::TextureViewDimension,
+                       multisampled: bool,
+                       vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: vis,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension,
+                multisampled,
+            },
+            count: None,
+        };
+        let vs = wgpu::ShaderStages::VERTEX;
+        let vis_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("visibility"),
+            entries: &[storage(0, true, vs), storage(1, true, vs), uniform(2, vs)],
+        });
+        let vis_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("visibility.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::VISIBILITY.into()),
+        });
+        let vis_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("visibility"),
+            bind_group_layouts: &[Some(&vis_layout)],
+            immediate_size: 0,
+        });
+        // [no culling, back faces culled (closed, outward-wound meshes: Mesh::closed)];
+        // the view maps the body's outward normals facing the viewer to counter-clockwise
+        let vis_pipelines = |count: u32, fs: &str, format| {
+            [None, Some(wgpu::Face::Back)].map(|cull_mode| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some("visibility"),
+                    layout: Some(&vis_pl),
+                    vertex: wgpu::VertexState {
+                        module: &vis_module,
+                        entry_point: Some("vs_main"),
+                        compilation_options: Default::default(),
+                        buffers: &[],
+                    },
+                    primitive: wgpu::PrimitiveState {
+                        topology: wgpu::PrimitiveTopology::TriangleList,
+                        cull_mode,
+                        front_face: wgpu::FrontFace::Ccw,
+                        ..Default::default()
+                    },
+                    depth_stencil: Some(wgpu::DepthStencilState {
+                        format: wgpu::TextureFormat::Depth32Float,
+                        depth_write_enabled: Some(true),
+                        depth_compare: Some(wgpu::CompareFunction::Less),
+                        stencil: Default::default(),
+                        bias: Default::default(),
+                    }),
+                    multisample: wgpu::MultisampleState {
+                        count,
+                        ..Default::default()
+                    },
+                    fragment: Some(wgpu::FragmentState {
+                        module: &vis_module,
+                        entry_point: Some(fs),
+                        compilation_options: Default::default(),
+                        targets: &[Some(wgpu::ColorTargetState {
+                            format,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::ALL,
+                        })],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            })
+        };
+        let vis_pipeline = vis_pipelines(1, "fs_main", wgpu::TextureFormat::R32Uint);
+        // R32Float: multisampled in core WebGPU (R32Uint needs an adapter-specific feature)
+        let vis_pipeline_msaa =
+            vis_pipelines(MSAA as u32, "fs_float", wgpu::TextureFormat::R32Float);
+        let dummy_ids = IdTarget::new(device, "unused ids", 1, 1).array_view;
+        let dummy_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("unused"),
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gather"),
+            entries: &[
+                texture(
+                    0,
+                    wgpu::TextureSampleType::Float { filterable: false },
+                    wgpu::TextureViewDimension::D2,
+                    true,
+                    cs,
+                ),
+                storage(1, false, cs),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: true,
+                        min_binding_size: wgpu::BufferSize::new(16),
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let gather_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("gather.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::GATHER.into()),
+        });
+        let gather_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("gather"),
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("gather"),
+                    bind_group_layouts: &[Some(&gather_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            module: &gather_module,
+            entry_point: Some("cs_gather"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let shade_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("shade"),
+            entries: &[
+                texture(
+                    0,
+                    wgpu::TextureSampleType::Uint,
+                    wgpu::TextureViewDimension::D2Array,
+                    false,
+                    cs,
+                ),
+                storage(1, true, cs),
+                storage(2, true, cs),
+                storage(3, true, cs),
+                uniform(4, cs),
+                storage(5, false, cs),
+                storage(6, false, cs),
+                storage(7, false, cs),
+                storage(8, false, cs),
+                // triangle ids seen from the transmitter (the receiver's when monostatic)
+                texture(
+                    9,
+                    wgpu::TextureSampleType::Uint,
+                    wgpu::TextureViewDimension::D2Array,
+                    false,
+                    cs,
+                ),
+                // the receiver's ids with K >= 4 samples (gather.wgsl)
+                storage(10, true, cs),
+            ],
+        });
+        let shade_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("shade"),
+                bind_group_layouts: &[Some(&shade_layout)],
+                immediate_size: 0,
+            });
+        let shade_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shade.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::shade_module().into()),
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(device_error(format!("pipeline creation failed: {e}")));
+        }
+        Ok(Pipelines {
+            vis_layout,
+            vis_pipeline,
+            vis_pipeline_msaa,
+            gather_layout,
+            gather_pipeline,
+            dummy_ids,
+            dummy_buffer,
+            shade_layout,
+            shade_pipeline_layout,
+            shade_module,
+            shade_pipelines: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The shade kernel specialized to `key` (compiled on first use, then cached).
+    pub(super) fn shade_pipeline(
+        &self,
+        device: &wgpu::Device,
+        key: ShadeKey,
+    ) -> Result<Arc<wgpu::ComputePipeline>> {
+        let mut map = self
+            .shade_pipelines
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        if let Some(p) = map.get(&key) {
+            return Ok(p.clone());
+        }
+        let b = |x: bool| if x { 1.0 } else { 0.0 };
+        let constants = [
+            ("CHANNELS", key.channels as f64),
+            ("WRITE_IMAGE", b(key.image)),
+            ("WRITE_RANGE", b(key.range)),
+            ("WRITE_PROFILE", b(key.profile)),
+            ("WRITE_TOTAL", b(key.total)),
+            ("WRITE_FOOTPRINT", b(key.footprint)),
+            ("SHADOWS", b(key.shadows)),
+            ("ELEMENT_MASK", key.elements as f64),
+            ("SAMPLES", key.samples as f64),
+            ("COVERAGE", b(key.analytic)),
+            ("IN_SHADER", b(key.in_shader)),
+        ];
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let p = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("shade"),
+            layout: Some(&self.shade_pipeline_layout),
+            module: &self.shade_module,
+            entry_point: Some("cs_main"),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &constants,
+                zero_initialize_workgroup_memory: true,
+            },
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(device_error(format!("shade pipeline creation failed: {e}")));
+        }
+        let p = Arc::new(p);
+        map.insert(key, p.clone());
+        Ok(p)
+    }
+}
+
+/// A visibility render pass into an id target (cleared to 0) and its depth buffer (cleared
+/// to the far plane, not stored).
+fn id_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    ids: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: ids,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Discard,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
+/// What a render uploads once for all its chunks: the mesh and tables, the shade kernel's
+/// uniform block, the visibility passes' uniform blocks (the image square, and with
+/// `K >= 4` a tile: the image with its margin) and the raster passes' displacements.
+pub(super) struct SceneBuffers {
+    geometry: wgpu::Buffer,
+    tables: wgpu::Buffer,
+    shade_params: wgpu::Buffer,
+    vis_image: wgpu::Buffer,
+    vis_tiles: Option<wgpu::Buffer>,
+    /// Per raster pass of an attitude, its translation ([`raster_shifts`]).
+    shifts: Vec<[f32; 4]>,
+}
+
+impl SceneBuffers {
+    pub(super) fn new(
+        dev: &wgpu::Device,
+        geometry: &[[f32; 4]],
+        tables: &GpuTables,
+        params: &ShadeParams,
+        lay: &Layout,
+        samples: usize,
+    ) -> Self {
+        let w = lay.width;
+        let usage_in = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let geo_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("geometry"),
+            contents: bytemuck::cast_slice(geometry),
+            usage: usage_in,
+        });
+        let tab_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("tables"),
+            contents: bytemuck::cast_slice(&tables.data),
+            usage: usage_in,
+        });
+        let shade_uni = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("shade params"),
+            contents: bytemuck::bytes_of(params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let msaa = samples >= MSAA;
+        let vis_uni = |ext: f64| {
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("visibility params"),
+                contents: bytemuck::bytes_of(&VisParams::new(ext, lay.ext)),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let vis_uni_image = vis_uni(lay.ext);
+        // a tile is the image with a one-texel margin (MsaaTiles)
+        let vis_uni_tiles = msaa.then(|| vis_uni(lay.ext * (w + 2) as f64 / w as f64));
+        SceneBuffers {
+            geometry: geo_buf,
+            tables: tab_buf,
+            shade_params: shade_uni,
+            vis_image: vis_uni_image,
+            vis_tiles: vis_uni_tiles,
+            shifts: raster_shifts(samples, lay.pix),
+        }
+    }
+
+    /// Raster passes per attitude of the receiver's view.
+    pub(super) fn passes(&self) -> usize {
+        self.shifts.len()
+    }
+}
+
+/// The bind groups of one chunk of attitudes: the receiver's raster (every pass's
+/// transform), bistatic the transmitter's, and the shade kernel's.
+pub(super) struct ChunkBindings {
+    vis: wgpu::BindGroup,
+    tx: Option<wgpu::BindGroup>,
+    shade: wgpu::BindGroup,
+}
+
+impl ChunkBindings {
+    /// For the attitudes `rots`; `beta`: the bistatic angle when the transmitter's view
+    /// is drawn (the shade kernel's cast shadows), else `None`.
+    pub(super) fn new(
+        gpu: &Gpu,
+        scene: &SceneBuffers,
+        targets: &Targets,
+        results: &ResultBuffers<'_>,
+        rots: &[Rot],
+        beta: Option<f64>,
+    ) -> Self {
+        let dev = &gpu.device;
+        let rot_words: Vec<[f32; 12]> = rots.iter().map(gpu_rotation).collect();
+        let rot_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("rotations"),
+            contents: bytemuck::cast_slice(&rot_words),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let vis_group = |rot: &wgpu::Buffer, uni: &wgpu::Buffer| {
+            dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("visibility"),
+                layout: &gpu.pipelines.vis_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: scene.geometry.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: rot.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: uni.as_entire_binding(),
+                    },
+                ],
+            })
+        };
+        // the receiver's raster transforms: attitude l, pass p at instance l P + p, its
+        // samples moved to where the rasterizer samples (shaders/visibility.wgsl)
+        let tfs: Vec<[f32; 16]> = rots
+            .iter()
+            .flat_map(|r| scene.shifts.iter().map(move |&t| raster_transform(r, t)))
+            .collect();
+        let tf_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("raster transforms"),
+            contents: bytemuck::cast_slice(&tfs),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let vis_bg = vis_group(
+            &tf_buf,
+            scene.vis_tiles.as_ref().unwrap_or(&scene.vis_image),
+        );
+        // bistatic: R_tx = R_y(-beta) R, computed in f64 (wi -> +z)
+        let tx_bg = beta.map(|beta| {
+            let tx_rots: Vec<[f32; 16]> = rots
+                .iter()
+                .map(|r| raster_transform(&transmitter_rotation(r, beta), [0.0; 4]))
+                .collect();
+            let buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("transmitter rotations"),
+                contents: bytemuck::cast_slice(&tx_rots),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+            vis_group(&buf, &scene.vis_image)
+        });
+        let pl = &gpu.pipelines;
+        let shade_bg = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("shade"),
+            layout: &pl.shade_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(
+                        targets
+                            .rcv
+                            .as_ref()
+                            .map_or(&pl.dummy_ids, |t| &t.array_view),
+                    ),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: scene.geometry.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: rot_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: scene.tables.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: scene.shade_params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: results.image.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: results.range.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: results.profile.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: results.total.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: wgpu::BindingResource::TextureView(
+                        targets
+                            .tx
+                            .as_ref()
+                            .or(targets.rcv.as_ref())
+                            .map_or(&pl.dummy_ids, |t| &t.array_view),
+                    ),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 10,
+                    resource: targets
+                        .ids_buf
+                        .as_ref()
+                        .unwrap_or(&pl.dummy_buffer)
+                        .as_entire_binding(),
+                },
+            ],
+        });
+        ChunkBindings {
+            vis: vis_bg,
+            tx: tx_bg,
+            shade: shade_bg,
+        }
+    }
+}
+
+/// Encode the passes of a chunk of `m` attitudes (`width` the internal image side): the
+/// receiver's visibility raster (`K >= 4`: per attitude its multisampled passes into the
+/// tiles, then their samples gathered), bistatic the transmitter's, then the shade kernel.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn encode_chunk(
+    enc: &mut wgpu::CommandEncoder,
+    gpu: &Gpu,
+    targets: &Targets,
+    bindings: &ChunkBindings,
+    pipeline: &wgpu::ComputePipeline,
+    m: usize,
+    n_tri: u32,
+    closed: bool,
+    width: usize,
+) {
+    let pl = &gpu.pipelines;
+    let (n_s, n_pass) = (targets.samples, targets.n_pass);
+    // the receiver's view, then (bistatic) the transmitter's
+    // (layer l K + k holds attitude l's sample k, drawn as instance l K + k)
+    let mut views_and_groups = vec![];
+    if let Some(t) = &targets.rcv {
+        views_and_groups.push((&t.id_views, &t.depth_views, &bindings.vis, n_s));
+    }
+    if let (Some(bg), Some(t)) = (&bindings.tx, &targets.tx) {
+        views_and_groups.push((&t.id_views, &t.depth_views, bg, 1));
+    }
+    if let (Some(t), Some(gbg)) = (&targets.tiles, &targets.gather_bg) {
+        // per attitude: its K / MSAA passes into the tiles, then their samples gathered
+        // into its slot of the id buffer (the same tiles for every attitude, so the
+        // rasterization does not depend on the attitude's place in the batch)
+        let side = t.side as u32;
+        for l in 0..m {
+            let mut pass = id_pass(enc, "visibility tiles", &t.view, &t.depth_view);
+            pass.set_pipeline(&pl.vis_pipeline_msaa[closed as usize]);
+            pass.set_bind_group(0, &bindings.vis, &[]);
+            for p in 0..n_pass {
+                let (x, y) = t.origin(p);
+                pass.set_viewport(x as f32, y as f32, side as f32, side as f32, 0.0, 1.0);
+                pass.set_scissor_rect(x as u32, y as u32, side, side);
+                let i = (l * n_pass + p) as u32;
+                pass.draw(0..(3 * n_tri), i..i + 1);
+            }
+            drop(pass);
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pl.gather_pipeline);
+            pass.set_bind_group(0, gbg, &[(l * targets.stride) as u32]);
+            let g = side.div_ceil(8);
+            pass.dispatch_workgroups(g, g, n_pass as u32);
+        }
+    }
+    for (views, dviews, bg, k_s) in views_and_groups {
+        for l in 0..m * k_s {
+            let mut pass = id_pass(enc, "visibility", &views[l], &dviews[l]);
+            pass.set_pipeline(&pl.vis_pipeline[closed as usize]);
+            pass.set_bind_group(0, bg, &[]);
+            let l = l as u32;
+            pass.draw(0..(3 * n_tri), l..l + 1);
+        }
+    }
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &bindings.shade, &[]);
+        let g = (width as u32).div_ceil(8);
+        pass.dispatch_workgroups(g, g, m as u32);
+    }
+}

@@ -1,0 +1,361 @@
+//! Reading a chunk's results back: the kernel's output buffers and their mapped copies
+//! ([`ResultBuffers`]), the fixed-point sums decoded to f64, the sampled pulse's profile
+//! accumulated on the host in f64 ([`host_profile`]) and the images downsampled to the
+//! sensor's pixels into the batch's arrays ([`HostOutputs`]).
+
+use super::device::{create_buffer, device_error};
+use super::plan::{KernelOutputs, Plan};
+use crate::error::Result;
+use crate::render::api::{Layout, Outputs, Rendered, SensorSetup};
+use crate::render::downsample::{downsample_range, downsample_sum};
+use crate::render::pulse::SampledPulse;
+use rayon::prelude::*;
+
+/// The batch's outputs on the host, filled chunk by chunk.
+pub(super) struct HostOutputs {
+    n: usize,
+    image: Option<Vec<f32>>,
+    range: Option<Vec<f32>>,
+    coverage: Option<Vec<f32>>,
+    profile: Option<Vec<f64>>,
+    total: Vec<f64>,
+}
+
+impl HostOutputs {
+    /// For `n` attitudes of `res x res` pixels, `channels` channels and `nb` bins: zeros,
+    /// the range NaN (nothing seen).
+    pub(super) fn new(outputs: Outputs, n: usize, res: usize, channels: usize, nb: usize) -> Self {
+        HostOutputs {
+            n,
+            image: outputs
+                .image
+                .then(|| vec![0.0f32; n * res * res * channels]),
+            range: outputs.range.then(|| vec![f32::NAN; n * res * res]),
+            coverage: outputs.range.then(|| vec![0.0f32; n * res * res]),
+            profile: outputs.profile.then(|| vec![0.0f64; n * nb * channels]),
+            total: vec![0.0f64; n * channels],
+        }
+    }
+
+    pub(super) fn into_rendered(
+        self,
+        channels: usize,
+        lay: &Layout,
+        sensor: &SensorSetup,
+    ) -> Rendered {
+        let res = sensor.resolution;
+        Rendered {
+            n: self.n,
+            height: res,
+            width: res,
+            channels,
+            image: self.image,
+            range: self.range,
+            coverage: self.coverage,
+            profile: self.profile,
+            total: self.total,
+            r_min: lay.r_min,
+            bin_width: sensor.bin_width,
+            n_bins: lay.n_bins,
+            pixel_size: lay.pix * sensor.supersampling as f64,
+            extent: lay.ext,
+        }
+    }
+}
+
+/// The kernel's output buffers for a chunk of up to `c` attitudes (16-byte placeholders
+/// for those not computed), the mapped copies of those read back, and what decoding them
+/// needs.
+pub(super) struct ResultBuffers<'a> {
+    pub(super) image: wgpu::Buffer,
+    pub(super) range: wgpu::Buffer,
+    pub(super) profile: wgpu::Buffer,
+    pub(super) total: wgpu::Buffer,
+    image_read: Option<wgpu::Buffer>,
+    range_read: Option<wgpu::Buffer>,
+    profile_read: Option<wgpu::Buffer>,
+    total_read: wgpu::Buffer,
+    kern: KernelOutputs,
+    channels: usize,
+    /// The fixed-point scale the kernel uses.
+    fix_scale: f64,
+    lay: &'a Layout,
+    sensor: &'a SensorSetup,
+}
+
+impl<'a> ResultBuffers<'a> {
+    pub(super) fn new(
+        dev: &wgpu::Device,
+        plan: &Plan,
+        lay: &'a Layout,
+        sensor: &'a SensorSetup,
+        c: usize,
+        fix_scale: f64,
+    ) -> Self {
+        let (kern, channels) = (plan.kern, plan.channels);
+        let (w, nb) = (lay.width, lay.n_bins);
+        let rng_stride = kern.range_words();
+        let mk = |label: &str, size: u64, usage: wgpu::BufferUsages| {
+            create_buffer(dev, label, size, usage)
+        };
+        let out_usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let px = w * w;
+        let img_size = if kern.image {
+            (c * px * channels * 4) as u64
+        } else {
+            16
+        };
+        let rng_size = if kern.range {
+            (c * px * 4 * rng_stride) as u64
+        } else {
+            16
+        };
+        let prof_size = if kern.profile {
+            (c * nb * channels * 8) as u64
+        } else {
+            16
+        };
+        let tot_size = (c * channels * 8) as u64;
+        let img_buf = mk("image", img_size, out_usage);
+        let rng_buf = mk("range", rng_size, out_usage);
+        let prof_buf = mk("profile", prof_size, out_usage);
+        let tot_buf = mk("total", tot_size, out_usage);
+        let read_usage = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        let img_read = kern.image.then(|| mk("image read", img_size, read_usage));
+        let rng_read = kern.range.then(|| mk("range read", rng_size, read_usage));
+        let prof_read = kern
+            .profile
+            .then(|| mk("profile read", prof_size, read_usage));
+        let tot_read = mk("total read", tot_size, read_usage);
+        ResultBuffers {
+            image: img_buf,
+            range: rng_buf,
+            profile: prof_buf,
+            total: tot_buf,
+            image_read: img_read,
+            range_read: rng_read,
+            profile_read: prof_read,
+            total_read: tot_read,
+            kern,
+            channels,
+            fix_scale,
+            lay,
+            sensor,
+        }
+    }
+
+    /// Bytes of `m` attitudes' image, range, profile and total.
+    fn bytes(&self, m: usize) -> (u64, u64, u64, u64) {
+        let (channels, nb) = (self.channels, self.lay.n_bins);
+        let px = self.lay.width * self.lay.width;
+        let img_bytes = (m * px * channels * 4) as u64;
+        let rng_bytes = (m * px * 4 * self.kern.range_words()) as u64;
+        let prof_bytes = (m * nb * channels * 8) as u64;
+        let tot_bytes = (m * channels * 8) as u64;
+        (img_bytes, rng_bytes, prof_bytes, tot_bytes)
+    }
+
+    /// Zero the sums the kernel accumulates atomically (before its dispatch).
+    pub(super) fn clear(&self, enc: &mut wgpu::CommandEncoder) {
+        if self.kern.profile {
+            enc.clear_buffer(&self.profile, 0, None);
+        }
+        enc.clear_buffer(&self.total, 0, None);
+    }
+
+    /// Copy the results of `m` attitudes to the mapped buffers (after the kernel).
+    pub(super) fn copy_for_readback(&self, enc: &mut wgpu::CommandEncoder, m: usize) {
+        let copy =
+            |enc: &mut wgpu::CommandEncoder, src: &wgpu::Buffer, dst: &wgpu::Buffer, size| {
+                enc.copy_buffer_to_buffer(src, 0, dst, 0, Some(size));
+            };
+        let (img_bytes, rng_bytes, prof_bytes, tot_bytes) = self.bytes(m);
+        if let Some(b) = &self.image_read {
+            copy(enc, &self.image, b, img_bytes);
+        }
+        if let Some(b) = &self.range_read {
+            copy(enc, &self.range, b, rng_bytes);
+        }
+        if let Some(b) = &self.profile_read {
+            copy(enc, &self.profile, b, prof_bytes);
+        }
+        if self.kern.total() {
+            copy(enc, &self.total, &self.total_read, tot_bytes);
+        }
+    }
+
+    /// Read the results of the chunk of `m` attitudes from `start` (submitted) into `host`:
+    /// the totals and the profile from the fixed-point sums, a sampled pulse's profile
+    /// from the footprints, the images downsampled to the sensor's pixels.
+    pub(super) fn read_chunk(
+        &self,
+        dev: &wgpu::Device,
+        start: usize,
+        m: usize,
+        host: &mut HostOutputs,
+    ) -> Result<()> {
+        let (lay, sensor) = (self.lay, self.sensor);
+        let (channels, nb, fix_scale) = (self.channels, lay.n_bins, self.fix_scale);
+        let (w, ss, res) = (lay.width, sensor.supersampling, sensor.resolution);
+        let px = w * w;
+        let rng_stride = self.kern.range_words();
+        let (img_bytes, rng_bytes, prof_bytes, tot_bytes) = self.bytes(m);
+        let read = |b: &wgpu::Buffer, bytes: u64| map_read(dev, b, bytes);
+        let fixed = |bytes: &[u8]| -> Vec<f64> {
+            let words: &[u32] = bytemuck::cast_slice(bytes);
+            words
+                .chunks_exact(2)
+                .map(|p| ((((p[1] as u64) << 32) | p[0] as u64) as i64) as f64 / fix_scale)
+                .collect()
+        };
+        if self.kern.total() {
+            let t = fixed(&read(&self.total_read, tot_bytes)?);
+            host.total[start * channels..(start + m) * channels].copy_from_slice(&t);
+        }
+        if let (Some(b), Some(out)) = (&self.profile_read, host.profile.as_mut()) {
+            let bytes = read(b, prof_bytes)?;
+            if !self.kern.total() {
+                // exact: sums of the fixed-point integers (|sum| < 2^61 by the scale)
+                let words: &[u32] = bytemuck::cast_slice(&bytes);
+                for l in 0..m {
+                    for ch in 0..channels {
+                        let s: i64 = (0..nb)
+                            .map(|k| {
+                                let i = 2 * ((l * nb + k) * channels + ch);
+                                (((words[i + 1] as u64) << 32) | words[i] as u64) as i64
+                            })
+                            .sum();
+                        host.total[(start + l) * channels + ch] = s as f64 / fix_scale;
+                    }
+                }
+            }
+            let p = fixed(&bytes);
+            out[start * nb * channels..(start + m) * nb * channels].copy_from_slice(&p);
+        }
+        let raw_img = self
+            .image_read
+            .as_ref()
+            .map(|b| read(b, img_bytes))
+            .transpose()?;
+        let raw_rng = self
+            .range_read
+            .as_ref()
+            .map(|b| read(b, rng_bytes))
+            .transpose()?;
+        if let (Some(pulse), Some(out)) = (&sensor.pulse, host.profile.as_mut()) {
+            // sampled pulse: the profile from the per-pixel footprints, in f64 on the host
+            let img: &[f32] = bytemuck::cast_slice(raw_img.as_deref().expect("kernel image"));
+            let foot: &[f32] = bytemuck::cast_slice(raw_rng.as_deref().expect("footprints"));
+            let cap = 2f64.powi(61) / (fix_scale * px as f64);
+            let prof = &mut out[start * nb * channels..(start + m) * nb * channels];
+            prof.par_chunks_mut(nb * channels)
+                .enumerate()
+                .for_each(|(l, p)| {
+                    host_profile(
+                        pulse,
+                        &img[l * px * channels..(l + 1) * px * channels],
+                        &foot[l * px * 4..(l + 1) * px * 4],
+                        channels,
+                        lay.r_min,
+                        sensor.bin_width,
+                        cap,
+                        p,
+                    )
+                });
+        }
+        if let (Some(raw), Some(out)) = (&raw_img, host.image.as_mut()) {
+            let v: &[f32] = bytemuck::cast_slice(raw);
+            downsample_sum(
+                v,
+                m,
+                w,
+                ss,
+                channels,
+                &mut out[start * res * res * channels..],
+            );
+        }
+        if let (Some(raw), Some(out), Some(cov)) =
+            (&raw_rng, host.range.as_mut(), host.coverage.as_mut())
+        {
+            let v: &[f32] = bytemuck::cast_slice(raw);
+            // (range, ..., covered fraction) per pixel
+            let r0: Vec<f32> = v.iter().step_by(rng_stride).copied().collect();
+            let c0: Vec<f32> = v
+                .chunks_exact(rng_stride)
+                .map(|p| p[rng_stride - 1])
+                .collect();
+            downsample_range(
+                &r0,
+                &c0,
+                m,
+                w,
+                ss,
+                &mut out[start * res * res..],
+                &mut cov[start * res * res..],
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The first `bytes` of the mappable buffer `b`, once the device has finished with it.
+fn map_read(dev: &wgpu::Device, b: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+    let slice = b.slice(0..bytes);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    dev.poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| device_error(format!("device poll failed: {e}")))?;
+    let v = slice
+        .get_mapped_range()
+        .map_err(|e| device_error(format!("cannot map a result buffer: {e}")))?
+        .to_vec();
+    b.unmap();
+    Ok(v)
+}
+
+/// The profile of one attitude for a sampled pulse, on the host in f64: every covered
+/// pixel (`foot` = (r0, a, b, coverage) per pixel, r0 NaN where empty; `img` its `ch` channels)
+/// adds `W_k = C(e_{k+1} - r0) - C(e_k - r0)` times its channels to the bins its footprint
+/// and the pulse reach, `C` = [`SampledPulse::cdf_box2`]. The channels are clamped to
+/// `cap` as in the kernel's fixed-point sums, so that the profile sums to the total.
+#[allow(clippy::too_many_arguments)]
+pub fn host_profile(
+    pulse: &SampledPulse,
+    img: &[f32],
+    foot: &[f32],
+    ch: usize,
+    r_min: f64,
+    bin_width: f64,
+    cap: f64,
+    out: &mut [f64],
+) {
+    let nb = out.len() / ch;
+    let (lo, hi) = pulse.support();
+    let mut edges = Vec::new();
+    let mut weights = Vec::new();
+    for (k, f) in foot.chunks_exact(4).enumerate() {
+        let r0 = f[0] as f64;
+        let v = &img[k * ch..(k + 1) * ch];
+        if r0.is_nan() || v[0] == 0.0 {
+            continue;
+        }
+        let (a, b) = (f[1] as f64, f[2] as f64);
+        let half = 0.5 * (a + b);
+        let k0 = (((r0 - half + lo - r_min) / bin_width).floor().max(0.0) as usize).min(nb - 1);
+        let k1 = (((r0 + half + hi - r_min) / bin_width).floor().max(0.0) as usize).min(nb - 1);
+        edges.clear();
+        edges.extend((k0..=k1 + 1).map(|j| r_min + j as f64 * bin_width));
+        weights.clear();
+        weights.resize(k1 + 1 - k0, 0.0);
+        pulse.bin_weights(r0, a, b, &edges, &mut weights);
+        for (j, &wt) in weights.iter().enumerate() {
+            if wt != 0.0 {
+                let o = &mut out[(k0 + j) * ch..(k0 + j + 1) * ch];
+                for c in 0..ch {
+                    o[c] += wt * (v[c] as f64).clamp(-cap, cap);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,98 @@
+//! One entry for every backend: a render request (mesh, the scene's materials and table
+//! cache, sensor, attitudes, outputs) run on the [`Backend`] it names, the GPU kernels
+//! ([`crate::render::gpu`]) or one of the f64 CPU renderers ([`crate::render::cpu`]).
+//! The Python binding only converts its arguments and calls [`render`].
+
+use super::api::{Outputs, Rendered, SensorSetup};
+use super::cpu;
+use super::geometry::{Mesh, Rot};
+use super::gpu::{self, DeviceChoice};
+use super::tables::SceneTables;
+use crate::brdf::table::BrdfTableOptions;
+use crate::error::Result;
+
+/// Which renderer runs a request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// The wgpu kernels (f32) on the adapter chosen, with the scene's packed tables.
+    Gpu(DeviceChoice),
+    /// The kernels' algorithm in f64 on the CPU with the same tables
+    /// ([`cpu::render_tables`], `Lidar(arithmetic="f64")`).
+    Cpu64,
+    /// The exact f64 reference: every material evaluated by the core, no tables
+    /// ([`cpu::render_reference`], `quality="reference"`).
+    Reference,
+}
+
+impl Backend {
+    /// The backend a device string names: `"twin"` ([`Backend::Cpu64`]), `"reference"`, or
+    /// an adapter ([`DeviceChoice::parse`]: `"auto"`, `"cpu"`/`"lavapipe"`, `"gpu"`).
+    pub fn parse(device: &str) -> Result<Self> {
+        match device {
+            "twin" => Ok(Backend::Cpu64),
+            "reference" => Ok(Backend::Reference),
+            _ => DeviceChoice::parse(device).map(Backend::Gpu),
+        }
+    }
+}
+
+/// Render a batch of attitudes (`rotations`) of `mesh` on `backend`, with the scene's
+/// materials and their tables for the sensor's bistatic angle and `table_options` (built on
+/// first use and cached in `tables`; the reference uses neither). The CPU backends first
+/// refuse a render that would not fit ([`cpu::check_cpu_render`]). Returns the result and
+/// what rendered it: the adapter's name, or `"f64 twin (CPU, BRDF tables)"` and
+/// `"reference (f64 CPU, exact BRDFs)"`.
+pub fn render(
+    mesh: &Mesh,
+    tables: &SceneTables,
+    table_options: &BrdfTableOptions,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    backend: Backend,
+) -> Result<(Rendered, String)> {
+    let beta = sensor.bistatic_angle;
+    match backend {
+        Backend::Reference => {
+            cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
+            let r = cpu::render_reference(mesh, sensor, rotations, outputs, &tables.materials);
+            Ok((r, "reference (f64 CPU, exact BRDFs)".to_string()))
+        }
+        Backend::Cpu64 => {
+            cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
+            let (_, f64_tables, _) = tables.get_with_tables(beta, table_options)?;
+            let r = cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables);
+            Ok((r, "f64 twin (CPU, BRDF tables)".to_string()))
+        }
+        Backend::Gpu(choice) => {
+            let (packed, _) = tables.get_with(beta, table_options)?;
+            let g = gpu::context(choice)?;
+            let r = gpu::render(&g, mesh, &packed, sensor, rotations, outputs)?;
+            Ok((r, g.info.name.clone()))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The device strings the Python side sends name the backends; anything else is
+    /// refused with the adapter choices, as before there was a `Backend`.
+    #[test]
+    fn device_strings_name_the_backends() {
+        assert_eq!(Backend::parse("twin").unwrap(), Backend::Cpu64);
+        assert_eq!(Backend::parse("reference").unwrap(), Backend::Reference);
+        for (s, c) in [
+            ("auto", DeviceChoice::Auto),
+            ("cpu", DeviceChoice::Cpu),
+            ("lavapipe", DeviceChoice::Cpu),
+            ("gpu", DeviceChoice::Gpu),
+        ] {
+            assert_eq!(Backend::parse(s).unwrap(), Backend::Gpu(c));
+        }
+        let e = Backend::parse("f64").unwrap_err().to_string();
+        let d = DeviceChoice::parse("f64").unwrap_err().to_string();
+        assert_eq!(e, d);
+    }
+}
