@@ -38,8 +38,9 @@ impl Backend {
 
 /// Render a batch of attitudes (`rotations`) of `mesh` on `backend`, with the scene's
 /// materials and their tables for the sensor's bistatic angle and `table_options` (built on
-/// first use and cached in `tables`; the reference uses neither). The CPU backends first
-/// refuse a render that would not fit ([`cpu::check_cpu_render`]). Returns the result and
+/// first use and cached in `tables`; the reference uses neither). An empty batch is
+/// refused ([`gpu::check_batch`]), and the CPU backends refuse a render that would not fit
+/// ([`cpu::check_cpu_render`]). Returns the result and
 /// what rendered it: the adapter's name, or `"f64 twin (CPU, BRDF tables)"` and
 /// `"reference (f64 CPU, exact BRDFs)"`.
 pub fn render(
@@ -51,6 +52,7 @@ pub fn render(
     outputs: Outputs,
     backend: Backend,
 ) -> Result<(Rendered, String)> {
+    gpu::check_batch(rotations)?;
     let beta = sensor.bistatic_angle;
     match backend {
         Backend::Reference => {
@@ -94,5 +96,39 @@ mod tests {
         let e = Backend::parse("f64").unwrap_err().to_string();
         let d = DeviceChoice::parse("f64").unwrap_err().to_string();
         assert_eq!(e, d);
+    }
+
+    /// An empty batch is an error on every backend. The GPU path panicked on it (its chunk
+    /// of 0 attitudes made `step_by(0)`), inside its pushed error scopes.
+    #[test]
+    fn an_empty_batch_is_refused_on_every_backend() {
+        use crate::render::test_scenes::{lambert_sensor, metal, uv_sphere};
+        let mesh = uv_sphere(0.5, 8, 16);
+        let tables = SceneTables::new(vec![std::sync::Arc::new(metal())]);
+        let all = Outputs {
+            image: true,
+            range: true,
+            profile: true,
+        };
+        for backend in [
+            Backend::Gpu(DeviceChoice::Cpu),
+            Backend::Cpu64,
+            Backend::Reference,
+        ] {
+            let r = render(
+                &mesh,
+                &tables,
+                &BrdfTableOptions::default(),
+                &lambert_sensor(8),
+                &[],
+                all,
+                backend,
+            );
+            let e = r.err().expect("an empty batch is refused").to_string();
+            assert!(e.contains("attitudes"), "{backend:?}: {e}");
+        }
+        let g = gpu::context(DeviceChoice::Cpu).unwrap();
+        let packed = tables.get(0.0).unwrap().0;
+        assert!(gpu::render(&g, &mesh, &packed, &lambert_sensor(8), &[], all).is_err());
     }
 }

@@ -51,6 +51,18 @@ use plan::Plan;
 use readback::{HostOutputs, ResultBuffers};
 use targets::Targets;
 
+/// Refuse an empty batch of attitudes.
+pub fn check_batch(rotations: &[Rot]) -> Result<()> {
+    if rotations.is_empty() {
+        return Err(crate::Error::param(
+            "attitudes",
+            "an empty batch (N = 0)",
+            "at least one attitude",
+        ));
+    }
+    Ok(())
+}
+
 /// Render a batch of attitudes (rotations) of `mesh` with the packed tables.
 pub fn render(
     gpu: &Gpu,
@@ -60,6 +72,8 @@ pub fn render(
     rotations: &[Rot],
     outputs: Outputs,
 ) -> Result<Rendered> {
+    // an empty batch would make an empty chunk, and stepping by it panics
+    check_batch(rotations)?;
     let lay = Layout::new(mesh, sensor);
     lay.check_bins(sensor)?;
     plan::check_image(gpu, &lay, sensor, mesh.faces.len())?;
