@@ -48,3 +48,35 @@ def test_bad_settings_name_the_parameter(kw, name) -> None:
 def test_settings_of_another_type_are_refused() -> None:
     with pytest.raises(pprender.Error, match="settings"):
         pprender.render(SCENE, pprender.Lidar(resolution=16), Q, settings={"quality": "fast"})
+
+
+def test_one_render_call_crosses_into_rust_once(monkeypatch) -> None:
+    """A render is one call of the extension: attitudes go in as given (quaternions are
+    converted in Rust, not sent out and back), and the tables' build time comes back with
+    the result instead of through a separate ``prepare`` call."""
+    scene = pprender.Scene(models.sphere(0.3, 2), pprender.Material("ggx", alpha=0.27, eta=1.4))
+
+    class Counting:
+        def __init__(self, inner) -> None:
+            self.inner, self.calls = inner, []
+
+        def __getattr__(self, name):
+            attr = getattr(self.inner, name)
+            if callable(attr):
+                def call(*a, **k):
+                    self.calls.append(name)
+                    return attr(*a, **k)
+                return call
+            return attr
+
+    proxy = Counting(scene._core)
+    monkeypatch.setattr(scene, "_core", proxy)
+    from pprender.lidar import dispatch
+
+    monkeypatch.setattr(dispatch._core, "quaternions_to_rotations",
+                        lambda *a: (_ for _ in ()).throw(AssertionError("round trip")))
+    first = pprender.render(scene, pprender.Lidar(resolution=16), Q, outputs=("profile",))
+    again = pprender.render(scene, pprender.Lidar(resolution=16), Q, outputs=("profile",))
+    assert proxy.calls == ["render", "render"]
+    assert first.table_seconds > 0 and again.table_seconds == 0.0
+    np.testing.assert_array_equal(first.profile, again.profile)

@@ -11,7 +11,7 @@ use crate::render::pulse::SampledPulse;
 use crate::render::request::{self, Backend};
 use crate::render::tables::SceneTables;
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
-use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
@@ -189,7 +189,9 @@ impl PyRenderScene {
         })
     }
 
-    /// Render a batch: `rotations` (n, 3, 3) body -> telescope. Returns a dict of arrays.
+    /// Render a batch: `rotations` (n, 3, 3) body -> telescope, or (n, 4) unit quaternions
+    /// `(w, x, y, z)`. Returns a dict of arrays and `table_seconds`, the time spent building
+    /// the materials' tables in this call (0 when cached).
     /// `device = "reference"`: the f64 CPU reference (`cpu::render_reference`, exact
     /// BRDFs, no tables; the table keywords are then unused). `device = "twin"`: the
     /// kernel's f64 CPU twin with the same tables (`cpu::render_tables`).
@@ -202,7 +204,7 @@ impl PyRenderScene {
     fn render<'py>(
         &self,
         py: Python<'py>,
-        rotations: PyReadonlyArray3<'py, f64>,
+        rotations: PyReadonlyArrayDyn<'py, f64>,
         resolution: usize,
         supersampling: usize,
         samples: usize,
@@ -237,25 +239,7 @@ impl PyRenderScene {
             double_order,
             in_shader,
         );
-        let rv = rotations.as_array();
-        if rv.shape()[1] != 3 || rv.shape()[2] != 3 {
-            return Err(crate::Error::Shape(format!(
-                "rotations must have shape (n, 3, 3), got {:?}",
-                rv.shape()
-            ))
-            .into());
-        }
-        let rots: Vec<Rot> = rv
-            .outer_iter()
-            .map(|m| {
-                [
-                    [m[[0, 0]], m[[0, 1]], m[[0, 2]]],
-                    [m[[1, 0]], m[[1, 1]], m[[1, 2]]],
-                    [m[[2, 0]], m[[2, 1]], m[[2, 2]]],
-                ]
-            })
-            .collect();
-        check_rotations(&rots)?;
+        let rots = attitudes(rotations)?;
         let backend = Backend::parse(device)?;
         let sensor = SensorSetup {
             resolution,
@@ -278,10 +262,12 @@ impl PyRenderScene {
             profile,
         };
         let mesh = self.mesh.clone();
-        let (r, dev_name) = py.detach(|| {
+        let out = py.detach(|| {
             request::render(&mesh, &self.tables, &opts, &sensor, &rots, outputs, backend)
         })?;
+        let (r, dev_name) = (out.rendered, out.device);
         let d = PyDict::new(py);
+        d.set_item("table_seconds", out.table_seconds)?;
         let (n, h, w, c) = (r.n, r.height, r.width, r.channels);
         let tot = Array2::from_shape_vec((n, c), r.total).expect("shape");
         d.set_item("total", tot.into_pyarray(py))?;
@@ -322,6 +308,40 @@ fn sample_offsets<'py>(py: Python<'py>, k: usize) -> PyResult<Bound<'py, numpy::
         .map(|p| p.to_vec())
         .collect();
     Ok(numpy::PyArray2::from_vec2(py, &v).expect("rectangular"))
+}
+
+/// The attitudes of a render call: (n, 3, 3) rotation matrices or (n, 4) unit quaternions
+/// `(w, x, y, z)`, checked.
+fn attitudes(a: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<Rot>> {
+    let v = a.as_array();
+    let rots = match v.shape() {
+        [_, 4] => {
+            let qs: Vec<[f64; 4]> = v
+                .outer_iter()
+                .map(|r| [r[0], r[1], r[2], r[3]])
+                .collect();
+            rotations_from_quaternions(&qs)?
+        }
+        [_, 3, 3] => v
+            .outer_iter()
+            .map(|m| {
+                [
+                    [m[[0, 0]], m[[0, 1]], m[[0, 2]]],
+                    [m[[1, 0]], m[[1, 1]], m[[1, 2]]],
+                    [m[[2, 0]], m[[2, 1]], m[[2, 2]]],
+                ]
+            })
+            .collect(),
+        shape => {
+            return Err(crate::Error::Shape(format!(
+                "invalid attitudes: shape {shape:?}; expected (n, 4) quaternions (w, x, y, z) or \
+                 (n, 3, 3) rotation matrices"
+            ))
+            .into())
+        }
+    };
+    check_rotations(&rots)?;
+    Ok(rots)
 }
 
 /// Rotation matrices (n, 3, 3) from (n, 4) quaternions `(w, x, y, z)`.

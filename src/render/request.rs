@@ -40,9 +40,8 @@ impl Backend {
 /// materials and their tables for the sensor's bistatic angle and `table_options` (built on
 /// first use and cached in `tables`; the reference uses neither). An empty batch is
 /// refused ([`gpu::check_batch`]), and the CPU backends refuse a render that would not fit
-/// ([`cpu::check_cpu_render`]). Returns the result and
-/// what rendered it: the adapter's name, or `"f64 twin (CPU, BRDF tables)"` and
-/// `"reference (f64 CPU, exact BRDFs)"`.
+/// ([`cpu::check_cpu_render`]). Returns the result, what rendered it and the tables' build
+/// time ([`RenderOutput`]).
 pub fn render(
     mesh: &Mesh,
     tables: &SceneTables,
@@ -51,28 +50,48 @@ pub fn render(
     rotations: &[Rot],
     outputs: Outputs,
     backend: Backend,
-) -> Result<(Rendered, String)> {
+) -> Result<RenderOutput> {
     gpu::check_batch(rotations)?;
     let beta = sensor.bistatic_angle;
-    match backend {
+    let timed = std::time::Instant::now();
+    let seconds = |built: bool| if built { timed.elapsed().as_secs_f64() } else { 0.0 };
+    let (rendered, device, table_seconds) = match backend {
         Backend::Reference => {
             cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
             let r = cpu::render_reference(mesh, sensor, rotations, outputs, &tables.materials);
-            Ok((r, "reference (f64 CPU, exact BRDFs)".to_string()))
+            (r, "reference (f64 CPU, exact BRDFs)".to_string(), 0.0)
         }
         Backend::Cpu64 => {
             cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
-            let (_, f64_tables, _) = tables.get_with_tables(beta, table_options)?;
+            let (_, f64_tables, built) = tables.get_with_tables(beta, table_options)?;
+            let t = seconds(built);
             let r = cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables);
-            Ok((r, "f64 twin (CPU, BRDF tables)".to_string()))
+            (r, "f64 twin (CPU, BRDF tables)".to_string(), t)
         }
         Backend::Gpu(choice) => {
-            let (packed, _) = tables.get_with(beta, table_options)?;
+            let (packed, built) = tables.get_with(beta, table_options)?;
+            let t = seconds(built);
             let g = gpu::context(choice)?;
             let r = gpu::render(&g, mesh, &packed, sensor, rotations, outputs)?;
-            Ok((r, g.info.name.clone()))
+            (r, g.info.name.clone(), t)
         }
-    }
+    };
+    Ok(RenderOutput {
+        rendered,
+        device,
+        table_seconds,
+    })
+}
+
+/// What [`render`] returns.
+pub struct RenderOutput {
+    pub rendered: Rendered,
+    /// What rendered it: the adapter's name, `"f64 twin (CPU, BRDF tables)"` or
+    /// `"reference (f64 CPU, exact BRDFs)"`.
+    pub device: String,
+    /// Seconds spent building the materials' tables in this call (0 when they were
+    /// cached, and for the reference, which uses none).
+    pub table_seconds: f64,
 }
 
 #[cfg(test)]

@@ -40,7 +40,11 @@ def device_info(device: str = "auto") -> dict[str, Any]:
     return dict(_core.device_info(device))
 
 
-def _rotations(attitudes: Any) -> np.ndarray:
+def _attitude_array(attitudes: Any) -> np.ndarray:
+    """``attitudes`` as a float64 array of (N, 4) quaternions ``(w, x, y, z)`` or (N, 3, 3)
+    rotation matrices, shapes checked (a single one becomes a batch of one; a scipy
+    Rotation its quaternions). Their values are checked where they are used: by the
+    renderer, or :func:`_rotations`."""
     from ..inverse.so3 import scipy_quaternions
 
     q = scipy_quaternions(attitudes)
@@ -50,20 +54,24 @@ def _rotations(attitudes: Any) -> np.ndarray:
         a = np.asarray(attitudes, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise Error(f"invalid attitudes: not a float array ({e})") from None
-    if a.ndim == 1 and a.shape == (4,):
+    if a.shape in ((4,), (3, 3)):
         a = a[None]
-    if a.ndim == 2 and a.shape == (3, 3):
-        a = a[None]
-    if a.ndim == 2 and a.shape[1] == 4:
-        return np.asarray(_core.quaternions_to_rotations(np.ascontiguousarray(a)))
-    if a.ndim == 3 and a.shape[1:] == (3, 3):
-        if not np.all(np.isfinite(a)):
-            raise Error("invalid attitudes: non-finite rotation matrix entries")
+    if (a.ndim == 2 and a.shape[1] == 4) or (a.ndim == 3 and a.shape[1:] == (3, 3)):
         return np.ascontiguousarray(a)
     raise Error(
         f"invalid attitudes: shape {a.shape}; expected (N, 4) quaternions (w, x, y, z), "
         "(N, 3, 3) rotation matrices or a scipy Rotation"
     )
+
+
+def _rotations(attitudes: Any) -> np.ndarray:
+    """(N, 3, 3) rotation matrices (body to telescope) from any accepted ``attitudes``."""
+    a = _attitude_array(attitudes)
+    if a.ndim == 2:
+        return np.asarray(_core.quaternions_to_rotations(a))
+    if not np.all(np.isfinite(a)):
+        raise Error("invalid attitudes: non-finite rotation matrix entries")
+    return a
 
 
 class OffCentreWarning(UserWarning):
@@ -194,7 +202,7 @@ def render(
             )
     if device not in ("auto", "cpu", "lavapipe", "gpu"):
         raise Error(f'invalid device = {device!r}: one of "auto", "cpu" (lavapipe), "gpu"')
-    rot = _rotations(attitudes)
+    rot = _attitude_array(attitudes)
     if len(rot) == 0:
         raise Error("invalid attitudes: empty batch (N = 0)")
     if settings is None:
@@ -206,7 +214,6 @@ def render(
     topts: dict[str, Any] = {} if reference else dict(st.table_options())
     if st.brdf == "shader":
         topts["in_shader"] = True
-    t_tables = 0.0 if reference else float(scene._core.prepare(float(sensor.bistatic_angle), **topts))
     res = st.effective_resolution(scene.radius, sensor.range_fwhm)
     _check_framing(scene, res * int(st.supersampling))
     pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]
@@ -238,7 +245,7 @@ def render(
         pixel_size=float(d["pixel_size"]),
         extent=float(d["extent"]),
         device=str(d["device"]),
-        table_seconds=t_tables,
+        table_seconds=float(d["table_seconds"]),
         wavelength=float(sensor.wavelength),
     )
     if "profile" in d:
