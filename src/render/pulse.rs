@@ -1155,7 +1155,7 @@ mod tests {
 
     #[test]
     fn wgsl_parses_and_validates() {
-        let src = include_str!("../../shaders/pulse.wgsl");
+        let src = crate::render::shaders::PULSE;
         let module = naga::front::wgsl::parse_str(src).expect("pulse.wgsl parses");
         naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),

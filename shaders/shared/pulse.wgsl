@@ -2,8 +2,9 @@
 //
 // A line-by-line port of the f32 twin `cdf_gauss_box2_f32` in src/render/pulse.rs (same
 // constants, same branches, same order of operations); the formulas and the measured error
-// are documented there. Plain functions only (no bindings, no entry point): concatenate this
-// file into the profile kernel and call
+// are documented there. Plain functions only (no bindings, no entry point; the constants
+// are checked against the Rust ones by a test in src/render/shaders.rs): shade.wgsl includes
+// this file (`//#include "shared/pulse.wgsl"`) and calls
 //
 //   pulse_cdf_gauss_box2(x, sigma, a, b)
 //
