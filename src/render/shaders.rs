@@ -176,11 +176,13 @@ mod tests {
     }
 
     /// The WGSL constants that mirror Rust ones equal them (integers exactly, f32 bit for
-    /// bit); the constants file holds no other constant than these and the WGSL-only ones
+    /// bit: the layout of the tables, the visibility samples, the pulse's f32 constants
+    /// of [`crate::render::pulse::PulseFloat`]); the constants file holds no other constant than these and the WGSL-only ones
     /// listed here.
     #[test]
     fn wgsl_constants_equal_the_rust_ones() {
         use crate::render::gpu;
+        use crate::render::pulse::PulseFloat;
         let module = shade_module();
         let consts = wgsl_consts(&module);
         let value = |name: &str| {
@@ -197,15 +199,32 @@ mod tests {
         for (name, want) in uints {
             assert_eq!(wgsl_uint(&value(name)), want, "{name}");
         }
-        let floats: [(&str, f32); 4] = [
+        type P = f32;
+        let floats: [(&str, f32); 6] = [
             ("PI", std::f32::consts::PI),
             ("PULSE_ALPHA", crate::render::pulse::ALPHA_F32),
             ("PULSE_BETA", crate::render::pulse::BETA_F32),
-            ("PULSE_FRAC_1_SQRT_2", std::f32::consts::FRAC_1_SQRT_2),
+            ("PULSE_INV_SQRT_2PI", <P as PulseFloat>::INV_SQRT_2PI),
+            ("PULSE_FRAC_1_SQRT_2", <P as PulseFloat>::FRAC_1_SQRT_2),
+            ("PULSE_T_CLAMP", <P as PulseFloat>::T_CLAMP),
         ];
         for (name, want) in floats {
             assert_eq!(wgsl_f32(&value(name)).to_bits(), want.to_bits(), "{name}");
         }
+        // array<f32, 6>(...)
+        let inv_fact = value("PULSE_INV_FACT_EVEN");
+        let items: Vec<u32> = inv_fact
+            .split_once('(')
+            .and_then(|(_, r)| r.strip_suffix(')'))
+            .expect("array<f32, N>(...)")
+            .split(',')
+            .map(|v| wgsl_f32(v.trim()).to_bits())
+            .collect();
+        let want: Vec<u32> = <P as PulseFloat>::INV_FACT_EVEN
+            .iter()
+            .map(|x| x.to_bits())
+            .collect();
+        assert_eq!(items, want, "PULSE_INV_FACT_EVEN");
         let wgsl_only = ["LN_FLOOR_F32"];
         let constants = SHARED[0];
         assert_eq!(constants.0, "shared/constants.wgsl");
