@@ -23,15 +23,15 @@
 //! there mapped by `phi = phi* + L t^2` (the `theta` integral varies like a root of
 //! `phi - phi*` there; 6e-5 error for eta = 0.9 at order 128 without it).
 
-use super::material::Material;
 use super::single::masking_over_cosines;
+use super::surface::Surface;
 use crate::optics::frames::reflect;
 use crate::optics::fresnel::{reflectance, Eta};
 use std::f64::consts::{FRAC_PI_4, PI};
 
 /// Single-bounce albedo for incidence cosine `cos_i`, with the material's Fresnel
 /// (unpolarized reflectance) or with `F = 1`, using an `n x n` rule.
-pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64 {
+pub fn single_albedo(mat: &Surface, cos_i: f64, fresnel: bool, n: usize) -> f64 {
     let ci = cos_i.clamp(0.0, 1.0);
     if ci <= 0.0 {
         return 0.0;
@@ -147,31 +147,9 @@ pub fn single_albedo(mat: &Material, cos_i: f64, fresnel: bool, n: usize) -> f64
     total
 }
 
-/// Total directional albedo of `mat` for unpolarized light at incidence cosine `cos_i`:
-/// the single term by an `n x n` quadrature (with the real Fresnel, not the tables), the
-/// double term by its quadrature over `h1` (order `min(n, 128)`) with the tabulated escape
-/// `S`, plus the multiple and diffuse terms' hemispherical integrals, which are analytic.
-pub fn albedo(mat: &Material, cos_i: f64, n: usize) -> f64 {
-    let ci = cos_i.clamp(0.0, 1.0);
-    let si = ((1.0 - ci) * (1.0 + ci)).sqrt();
-    let single = if mat.spec.terms.single {
-        single_albedo(mat, ci, true, n)
-    } else {
-        0.0
-    };
-    let double = if mat.spec.terms.double {
-        mat.double_albedo([si, 0.0, ci], n.min(128))
-    } else {
-        0.0
-    };
-    let (ms, d) = mat.lambertian_albedo(ci, si);
-    single + double + ms + d
-}
-
 #[cfg(test)]
 mod tests {
-    use super::*;
-    use crate::brdf::{MaterialSpec, Terms};
+    use crate::brdf::{albedo, Material, MaterialSpec, Terms};
     use crate::microfacet::{Distribution, Shadowing};
     use crate::optics::fresnel::Eta;
 

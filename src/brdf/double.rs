@@ -44,8 +44,8 @@
 //! (factor 2) and vanishes for `gamma < 1e-6` (skipped). Its angular integral is of order
 //! `(lambda / l)^2` and is left out of the energy bookkeeping.
 
-use super::material::Material;
 use super::single::facet_sp_basis;
+use super::surface::Surface;
 use crate::optics::frames::{beam_bases, dot, neg, normalize, reflect, Frame, V3};
 use crate::optics::fresnel::{fresnel_amplitudes, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
@@ -75,7 +75,7 @@ fn reflect_field(e: CV3, k_in: V3, k_out: V3, h: V3, rs: C64, rp: C64, perp: V3)
 /// Returns `None` when the path does not exist (`h2` below the horizon or a facet seen from
 /// behind).
 pub fn double_jones(
-    mat: &Material,
+    mat: &Surface,
     wi: V3,
     wo: V3,
     h1: V3,
@@ -126,7 +126,7 @@ pub fn double_jones(
 /// false. Written without cancellation: with `f` the correlation of the azimuths,
 /// `= (1 - f) Q(a) / (c_b + N_b) + f max(0, N_b - c_b N_a / c_a) / (N_b (c_a + N_a)(c_b + N_b))`.
 #[inline]
-pub(crate) fn blocked_over_n(mat: &Material, a: V3, b: V3, correlated: bool) -> f64 {
+pub(crate) fn blocked_over_n(mat: &Surface, a: V3, b: V3, correlated: bool) -> f64 {
     let (ca, cb) = (a[2], b[2]);
     if ca <= 0.0 || cb < 0.0 {
         return 0.0;
@@ -157,7 +157,7 @@ pub(crate) fn blocked_over_n(mat: &Material, a: V3, b: V3, correlated: bool) -> 
 /// `P_i (P_o - P(wo, -d)) / N(-d)`; both over `cos_i cos_o`. Reciprocal: reversing the
 /// path swaps the two forms.
 #[inline]
-fn path_weight(mat: &Material, wi: V3, wo: V3, d: V3) -> f64 {
+fn path_weight(mat: &Surface, wi: V3, wo: V3, d: V3) -> f64 {
     let correlated = mat.spec.double_correlated;
     if d[2] >= 0.0 {
         blocked_over_n(mat, wi, d, correlated) * q_of(mat, wo)
@@ -168,7 +168,7 @@ fn path_weight(mat: &Material, wi: V3, wo: V3, d: V3) -> f64 {
 
 /// `Q(k) = P(k) / cos = 1 / (cos + N)`.
 #[inline]
-pub(crate) fn q_of(mat: &Material, k: V3) -> f64 {
+pub(crate) fn q_of(mat: &Surface, k: V3) -> f64 {
     let c = k[2];
     let s = (k[0] * k[0] + k[1] * k[1]).sqrt();
     1.0 / (c + mat.masking_excess(c, s))
@@ -374,7 +374,7 @@ fn phi_rule(n: usize, marks: &[Mark]) -> Vec<(f64, f64)> {
 /// on segment ends. `f(h, weight)` accumulates; `weight` includes the measure
 /// `D(h) d omega_h`.
 fn integrate_h(
-    mat: &Material,
+    mat: &Surface,
     order: usize,
     marks: &[Mark],
     breaks: &dyn Fn(f64, f64, &mut Vec<f64>),
@@ -515,7 +515,7 @@ fn cut_marks(v: V3) -> Vec<Mark> {
 /// The double-bounce Mueller BRDF (1/sr, no cosine), with the coherent-backscatter
 /// enhancement when `cbe` is true, by an `order x order` quadrature over `h1` split where
 /// `d` crosses the horizon, where `h2` would (d_z = wo_z) and where `wi.h1 = 0`.
-pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, cbe: bool) -> Mat4 {
+pub fn eval_double(mat: &Surface, wi: V3, wo: V3, frame: Frame, order: usize, cbe: bool) -> Mat4 {
     let mut acc = [[0.0; 4]; 4];
     if wi[2] <= 0.0 || wo[2] <= 0.0 {
         return acc;
@@ -592,7 +592,7 @@ pub fn eval_double(mat: &Material, wi: V3, wo: V3, frame: Frame, order: usize, c
 /// (`d2 = reflect(v, h)`): for `v` below the horizon `S(v) = int (v.h)+ D(h) P(d2) d omega_h`;
 /// for `v` above, `int (v.h)+ D(h) (P(d2) - P(d2, v)) / N(v) d omega_h` (the mirror form of
 /// the path weight). With the unpolarized Fresnel reflectance when `fresnel`.
-pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -> f64 {
+pub fn escape_after_bounce(mat: &Surface, v: V3, fresnel: bool, order: usize) -> f64 {
     let mut total = 0.0;
     let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| push_breaks(v, cp, sp, &[0.0], out);
     let mut body = |h: V3, wgt: f64| {
@@ -628,7 +628,7 @@ pub fn escape_after_bounce(mat: &Material, v: V3, fresnel: bool, order: usize) -
 /// approximation that ignores the polarization coupling of the two reflections), using
 /// `s_of(-d)` for the inner integral.
 pub fn double_albedo(
-    mat: &Material,
+    mat: &Surface,
     wi: V3,
     fresnel: bool,
     order: usize,
@@ -660,7 +660,7 @@ pub fn double_albedo(
 
 /// [`eval_double`] in the sp frame (where the coherent-backscatter reverse amplitude is
 /// derived), then expressed in `frame` by the Stokes rotations between the bases.
-pub fn eval_double_framed(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
+pub fn eval_double_framed(mat: &Surface, wi: V3, wo: V3, frame: Frame) -> Mat4 {
     let m = eval_double(
         mat,
         wi,

@@ -1,126 +1,12 @@
-//! [`Material`]: distribution, roughness, index, masking model, enabled terms, and the
-//! tables derived from them.
+//! [`Material`]: a validated [`MaterialSpec`] on its [`Surface`], with the tables the
+//! terms need derived from them (albedos, escape after a bounce).
 
-use crate::microfacet::masking::{self, ZTable, TABLE_NODES};
-use crate::microfacet::{seed, Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
+pub use super::spec::{MaterialSpec, Term, Terms};
+pub use super::surface::Surface;
+use crate::microfacet::masking::ZTable;
+use crate::microfacet::{Distribution, MaskingEval, Shadowing};
 use crate::optics::fresnel::{average_reflectance, Eta};
 use crate::{Error, Result};
-
-/// Which BRDF terms are summed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Terms {
-    pub single: bool,
-    pub double: bool,
-    pub multiple: bool,
-    pub diffuse: bool,
-}
-
-impl Terms {
-    /// Parse term names: "single", "double", "multiple", "diffuse".
-    pub fn parse<S: AsRef<str>>(names: &[S]) -> Result<Self> {
-        let mut t = Terms {
-            single: false,
-            double: false,
-            multiple: false,
-            diffuse: false,
-        };
-        for n in names {
-            match n.as_ref() {
-                "single" => t.single = true,
-                "double" => t.double = true,
-                "multiple" => t.multiple = true,
-                "diffuse" => t.diffuse = true,
-                other => return Err(Error::param(
-                    "terms",
-                    format!("{other:?}"),
-                    "each term must be one of \"single\", \"double\", \"multiple\", \"diffuse\"",
-                )),
-            }
-        }
-        if !(t.single || t.double || t.multiple || t.diffuse) {
-            return Err(Error::param("terms", "()", "enable at least one term"));
-        }
-        Ok(t)
-    }
-
-    pub fn names(&self) -> Vec<&'static str> {
-        let mut v = vec![];
-        if self.single {
-            v.push("single");
-        }
-        if self.double {
-            v.push("double");
-        }
-        if self.multiple {
-            v.push("multiple");
-        }
-        if self.diffuse {
-            v.push("diffuse");
-        }
-        v
-    }
-}
-
-/// Everything a user specifies; [`Material::new`] validates it and builds the tables.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MaterialSpec {
-    pub distribution: Distribution,
-    pub eta: Eta,
-    pub shadowing: Shadowing,
-    /// `None`: the default for the shadowing model ("seed" for APS, "none" for Smith).
-    pub correlation: Option<Correlation>,
-    pub smith_g1: SmithG1,
-    pub masking: MaskingEval,
-    pub terms: Terms,
-    pub diffuse_albedo: f64,
-    /// Quadrature order of the double-bounce integral (per dimension).
-    pub double_order: usize,
-    /// Add the coherent-backscatter enhancement to the double bounce.
-    pub coherent_backscatter: bool,
-    /// The double bounce's hit/escape probabilities use the material's correlated masking
-    /// (the seed's eq. 17, made reciprocal; default) or uncorrelated masking.
-    pub double_correlated: bool,
-    /// Wavelength (m), for the coherent-backscatter width.
-    pub wavelength: f64,
-    /// Surface correlation length (m): rms lateral separation of the two facets.
-    pub correlation_length: f64,
-}
-
-impl MaterialSpec {
-    /// A spec with the Python defaults: APS masking (tabulated, seed correlation), single +
-    /// multiple terms, no diffuse layer, double-bounce parameters at their defaults.
-    pub fn new(distribution: Distribution, eta: Eta) -> Self {
-        MaterialSpec {
-            distribution,
-            eta,
-            shadowing: Shadowing::Aps,
-            correlation: None,
-            smith_g1: SmithG1::Exact,
-            masking: MaskingEval::Table,
-            terms: Terms {
-                single: true,
-                double: false,
-                multiple: true,
-                diffuse: false,
-            },
-            diffuse_albedo: 0.0,
-            double_order: Self::DOUBLE_ORDER,
-            coherent_backscatter: true,
-            double_correlated: true,
-            wavelength: Self::WAVELENGTH,
-            correlation_length: Self::CORRELATION_LENGTH,
-        }
-    }
-
-    /// Defaults for the double-bounce parameters. `DOUBLE_ORDER`: the quadrature of
-    /// `double::eval_double` stays within 1e-4 of the term's M00 against order 384 (max
-    /// over the significant pairs of `python benchmarks/bench_double.py`: 1.3e-5, and at most
-    /// 1.5e-5 on its pair construction with two other seeds, where order 128 reaches 1.7e-4
-    /// on a near-grazing GGX pair; docs/double-bounce.md section 3).
-    pub const DOUBLE_ORDER: usize = 160;
-    pub const WAVELENGTH: f64 = 1064e-9;
-    pub const CORRELATION_LENGTH: f64 = 10e-6;
-}
 
 /// Albedo tables of one layer (see [`ZTable`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -211,10 +97,8 @@ fn node_theta(scale: f64, s_f: Option<f64>, i: usize, n: usize) -> f64 {
 /// A validated material with its caches.
 #[derive(Debug, Clone)]
 pub struct Material {
-    pub spec: MaterialSpec,
-    pub correlation: Correlation,
-    /// APS masking excess `N_D(theta)` table (when `masking = Table` and `shadowing = Aps`).
-    pub(crate) n_table: Option<ZTable>,
+    /// The spec, the masking correlation and its table (the material dereferences to it).
+    pub surface: Surface,
     /// Single-scattering albedo with `F = 1`, for the multiple term.
     pub(crate) e_white: Option<AlbedoTable>,
     /// Kulla-Conty factor `F_ms = F_avg^2 E_avg / (1 - F_avg (1 - E_avg))`.
@@ -226,6 +110,22 @@ pub struct Material {
     pub(crate) s_white: Option<(ZTable, ZTable)>,
     /// The same with the unpolarized Fresnel reflectance.
     pub(crate) s_fresnel: Option<(ZTable, ZTable)>,
+}
+
+impl std::ops::Deref for Material {
+    type Target = Surface;
+
+    #[inline]
+    fn deref(&self) -> &Surface {
+        &self.surface
+    }
+}
+
+impl std::ops::DerefMut for Material {
+    #[inline]
+    fn deref_mut(&mut self) -> &mut Surface {
+        &mut self.surface
+    }
 }
 
 /// Largest `|eta|` accepted. The Fresnel amplitudes form `eta^4`-sized intermediates (and
@@ -337,30 +237,16 @@ impl Material {
         {
             return Err(Error::param("masking", "\"seed\"", "the seed's closed form exists for shadowing=\"aps\" with distribution=\"blinn_phong\" only"));
         }
-        let correlation = spec.correlation.unwrap_or(match spec.shadowing {
-            Shadowing::Aps => Correlation::Seed,
-            _ => Correlation::None,
-        });
         let mut mat = Material {
-            spec,
-            correlation,
-            n_table: None,
+            surface: Surface::new(spec),
             e_white: None,
             f_ms: 1.0,
             e_spec: None,
             s_white: None,
             s_fresnel: None,
         };
-        let dist = mat.spec.distribution;
         let needs_albedo = mat.spec.terms.multiple || mat.spec.terms.diffuse;
         let exact = mat.spec.masking == MaskingEval::Exact;
-        if (mat.spec.shadowing == Shadowing::Aps || mat.smith_is_aps())
-            && (mat.spec.masking == MaskingEval::Table || (exact && needs_albedo))
-        {
-            mat.n_table = Some(ZTable::build(dist.table_scale(), TABLE_NODES, |t| {
-                masking::aps_excess(&dist, t)
-            }));
-        }
         // The escape and albedo tables normalize the double, multiple and diffuse terms
         // (to 1e-5); with masking="exact" they are filled with the tabulated masking (error
         // below 1e-8 in P) instead of a quadrature inside every node, which would take
@@ -477,53 +363,6 @@ impl Material {
             Some(st) => super::double::double_albedo(self, wi, true, n, &|u| eval_escape(st, u)),
             None => 0.0,
         }
-    }
-
-    /// The masking excess `N(k)` such that `P(k) = c/(c + N)` and `P(k)/c = 1/(c + N)`
-    /// for a direction with `cos theta = c`, `sin theta = s` (APS: `N_D`; Smith: `c Lambda`).
-    #[inline]
-    pub fn masking_excess(&self, c: f64, s: f64) -> f64 {
-        self.masking_excess_z(c, s, self.z_of(c, s))
-    }
-
-    /// The table coordinate `z` of a direction (shared by all per-material tables).
-    #[inline]
-    pub fn z_of(&self, c: f64, s: f64) -> f64 {
-        let den = self.spec.distribution.table_scale() * s + c;
-        if den <= 0.0 {
-            0.0
-        } else {
-            (c / den).clamp(0.0, 1.0)
-        }
-    }
-
-    /// [`Self::masking_excess`] with the table coordinate already computed.
-    #[inline]
-    pub fn masking_excess_z(&self, c: f64, s: f64, z: f64) -> f64 {
-        match self.spec.shadowing {
-            Shadowing::None => 0.0,
-            // Blinn-Phong's exact Smith function is the APS excess (masking.rs docs).
-            Shadowing::Smith if !self.smith_is_aps() => {
-                c * masking::smith_lambda(&self.spec.distribution, self.spec.smith_g1, c, s * s)
-            }
-            Shadowing::Smith | Shadowing::Aps => match self.spec.masking {
-                MaskingEval::Table => self.n_table.as_ref().unwrap().eval_z(z).max(0.0),
-                MaskingEval::Exact => masking::aps_excess(&self.spec.distribution, s.atan2(c)),
-                MaskingEval::Seed => match self.spec.distribution {
-                    Distribution::BlinnPhong { m } => seed::seed_aps_excess_cos(m, c),
-                    _ => unreachable!("checked in Material::new"),
-                },
-            },
-        }
-    }
-
-    /// Smith masking that is evaluated as the APS excess `N_D` (the exact Smith function of
-    /// a Blinn-Phong distribution, `smith_g1 = "exact"`).
-    #[inline]
-    pub fn smith_is_aps(&self) -> bool {
-        self.spec.shadowing == Shadowing::Smith
-            && self.spec.smith_g1 == SmithG1::Exact
-            && matches!(self.spec.distribution, Distribution::BlinnPhong { .. })
     }
 
     /// `E(theta)` of the white (F = 1) single-bounce term, if tabulated.

@@ -1,6 +1,6 @@
 //! Single-bounce term and the specular (flat-interface) Mueller matrix.
 
-use super::material::Material;
+use super::surface::Surface;
 use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, Frame, V3};
 use crate::optics::fresnel::{fresnel_amplitudes, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
@@ -46,7 +46,7 @@ fn facet_jones(wi: V3, wo: V3, h: V3, rs: C64, rp: C64, bases: (V3, V3, V3, V3))
 /// Masking term `G(wi, wo) / (cos_i cos_o)` (seed eq. 6 with `P(k) = c/(c + N)`), written
 /// with `Q = P/c = 1/(c + N)` so that it stays finite when one direction is grazing.
 #[inline]
-pub fn masking_over_cosines(mat: &Material, wi: V3, wo: V3) -> f64 {
+pub fn masking_over_cosines(mat: &Surface, wi: V3, wo: V3) -> f64 {
     let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
     let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
     masking_over_cosines_z(
@@ -63,7 +63,7 @@ pub fn masking_over_cosines(mat: &Material, wi: V3, wo: V3) -> f64 {
 /// [`masking_over_cosines`] with the horizontal lengths and table coordinates given.
 #[inline]
 fn masking_over_cosines_z(
-    mat: &Material,
+    mat: &Surface,
     wi: V3,
     wo: V3,
     si: f64,
@@ -134,45 +134,30 @@ pub(crate) fn single_mueller(
     m
 }
 
-/// The BRDF Mueller matrix `f(wi, wo)` (1/sr, no cosine factor) of `mat`: the sum of its
-/// enabled terms. `wi`, `wo` are unit vectors with `z >= 0`; a direction on the horizon
-/// (`z == 0`) gives the zero matrix (the cross-section integrand `f cos` vanishes there).
-pub fn eval(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
-    let mut m = [[0.0; 4]; 4];
-    let (ci, co) = (wi[2], wo[2]);
-    if ci <= 0.0 || co <= 0.0 {
-        return m;
-    }
-    let terms = mat.spec.terms;
-    let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
-    let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
-    let (zi, zo) = (mat.z_of(ci, si), mat.z_of(co, so));
-    if terms.single {
-        let g = masking_over_cosines_z(mat, wi, wo, si, so, zi, zo);
-        let bases = beam_bases(frame, wi, wo);
-        m = single_mueller(&mat.spec.distribution, mat.spec.eta, wi, wo, g, bases);
-    }
-    if terms.double {
-        let m2 = super::double::eval_double_framed(mat, wi, wo, frame);
-        for (row, r2) in m.iter_mut().zip(m2.iter()) {
-            for (x, y) in row.iter_mut().zip(r2.iter()) {
-                *x += y;
-            }
-        }
-    }
-    if terms.multiple {
-        m[0][0] += mat.multiple_z(zi, zo);
-    }
-    if terms.diffuse {
-        m[0][0] += mat.diffuse_z(ci, si, zi, co, so, zo);
-    }
-    m
+/// The single term `D G F / (4 cos_i cos_o)` of `mat` for local `wi`, `wo` above the surface
+/// (`si`, `so` their horizontal lengths, `zi`, `zo` their table coordinates), in the beam
+/// frames of `frame`.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn single_term(
+    mat: &Surface,
+    wi: V3,
+    wo: V3,
+    si: f64,
+    so: f64,
+    zi: f64,
+    zo: f64,
+    frame: Frame,
+) -> Mat4 {
+    let g = masking_over_cosines_z(mat, wi, wo, si, so, zi, zo);
+    let bases = beam_bases(frame, wi, wo);
+    single_mueller(&mat.spec.distribution, mat.spec.eta, wi, wo, g, bases)
 }
 
 /// Mueller reflectance (dimensionless) of the flat interface for incidence `wi`, into the
 /// mirror direction `wo = (-wi.x, -wi.y, wi.z)`: the `m -> inf` limit of the single term,
 /// and what Mitsuba's smooth `conductor` returns as its sample weight.
-pub fn specular(mat: &Material, wi: V3, frame: Frame) -> Mat4 {
+pub fn specular(mat: &Surface, wi: V3, frame: Frame) -> Mat4 {
     let wo = [-wi[0], -wi[1], wi[2]];
     let h = [0.0, 0.0, 1.0];
     let (rs, rp) = fresnel_amplitudes(wi[2].clamp(0.0, 1.0), mat.spec.eta);

@@ -341,7 +341,7 @@ impl ZTable {
 }
 
 /// Catmull-Rom cubic through `p1` (t = 0) and `p2` (t = 1) with neighbours `p0`, `p3`
-/// (the interpolation of every table in the crate and of `shaders/shade.wgsl`).
+/// (the interpolation of every table in the crate and of `shaders/shared/table.wgsl`).
 #[inline]
 pub fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
     let t2 = t * t;

@@ -112,18 +112,7 @@ pub use api::{
 /// Speed of light in vacuum (m/s).
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
 
-/// WGSL sources (one kernel per file; `pulse.wgsl` holds functions included into shade).
-pub mod shaders {
-    pub const VISIBILITY: &str = include_str!("../../shaders/visibility.wgsl");
-    pub const SHADE: &str = include_str!("../../shaders/shade.wgsl");
-    pub const PULSE: &str = include_str!("../../shaders/pulse.wgsl");
-    pub const GATHER: &str = include_str!("../../shaders/gather.wgsl");
-
-    /// The complete shade module (pulse functions + kernel).
-    pub fn shade_module() -> String {
-        format!("{PULSE}\n{SHADE}")
-    }
-}
+pub mod shaders;
 
 #[cfg(test)]
 mod tests {

@@ -60,6 +60,11 @@
 //! [`BETA_F32`] for the f32 twin (the f32 twin has a larger rounding floor, so it can afford
 //! the series over a wider range and must keep `1/(A B)` smaller).
 //!
+//! Both are one body, [`cdf_gauss_box2_generic`], over [`PulseFloat`], which holds what
+//! differs between them: the erfc (`libm::erfc` in f64, [`erfc_f32`] in f32), the switches,
+//! the input clamps, and the constants' rounding (the f32 ones as `shaders/shared/pulse.wgsl`
+//! writes them; that file ports the f32 instance line by line).
+//!
 //! # Sampled pulse
 //!
 //! See [`SampledPulse`]: the samples are joined piecewise linearly (the pulse is the sum of
@@ -69,7 +74,7 @@
 //! for wide footprints.
 
 use crate::{Error, Result};
-use libm::erfc;
+use num_traits::Float;
 
 /// Speed of light in vacuum (m/s), for converting a temporal pulse width to range.
 pub const C_LIGHT: f64 = 299_792_458.0;
@@ -83,11 +88,6 @@ pub const ALPHA_F32: f32 = 0.5;
 /// Regime switch of the f32 twin, see [`BETA_F64`].
 pub const BETA_F32: f32 = 1.0;
 
-const INV_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
-/// |t| beyond which phi, Q, E1 and the Hermite terms are taken as their limits (all below
-/// 1e-300 there).
-const T_CLAMP: f64 = 40.0;
-
 /// Gaussian range standard deviation from a temporal FWHM `tau` (s): the range FWHM is
 /// `c tau / 2` (two-way travel) and `sigma = FWHM / (2 sqrt(2 ln 2))`.
 pub fn sigma_from_fwhm_time(tau: f64) -> f64 {
@@ -100,132 +100,280 @@ pub fn sigma_from_range_fwhm(fwhm: f64) -> f64 {
 }
 
 // ---------------------------------------------------------------------------------------
-// f64 reference
+// Gaussian pulse: one body for the f64 reference and the f32 twin (of shaders/shared/pulse.wgsl)
 // ---------------------------------------------------------------------------------------
 
-/// Standard normal CDF, `erfc(-x/sqrt 2)/2` with `libm::erfc` (musl's port of the Sun/FreeBSD
-/// `s_erf.c`, error below 1 ulp). Not `statrs::function::erf::erfc`: statrs 0.19 writes the
-/// float-exact offsets of Boost's rational approximations as 10-digit f64 literals and is
-/// off by ~1e-11 for arguments >= 0.5 (e.g. Phi(1) by 1.4e-11; see the tests).
+/// The float types the Gaussian pulse's CDF is evaluated in: `f64` (the reference) and
+/// `f32` (the twin of `shaders/shared/pulse.wgsl`, whose constants a test compares with
+/// these). What differs between the two on purpose: the erfc, the regime switches, the
+/// clamps, and the constants' rounding (the f32 ones are written as in the WGSL).
+pub trait PulseFloat: Float {
+    /// Regime switch: the double moment series for `A < ALPHA` ([`ALPHA_F64`], [`ALPHA_F32`]).
+    const ALPHA: Self;
+    /// Regime switch: the series in the smaller width for `B < BETA` ([`BETA_F64`],
+    /// [`BETA_F32`]).
+    const BETA: Self;
+    const INV_SQRT_2PI: Self;
+    const FRAC_1_SQRT_2: Self;
+    /// |t| beyond which phi, Q, E1 and the Hermite terms are taken as their limits (all
+    /// below 1e-300 there).
+    const T_CLAMP: Self;
+    /// `1 / (2k)!`, `k = 0..=5`.
+    const INV_FACT_EVEN: [Self; 6];
+    /// Bound on `|x|` and on the widths.
+    const BIG: Self;
+    /// The scale is `s = max(sigma, KAPPA max(|x|, a, b), S_MIN)`.
+    const KAPPA: Self;
+    const S_MIN: Self;
+    /// The complementary error function.
+    fn erfc(x: Self) -> Self;
+    /// A constant of the formulas (small integers and halves: exact in both types).
+    fn lit(x: f64) -> Self;
+}
+
+impl PulseFloat for f64 {
+    const ALPHA: f64 = ALPHA_F64;
+    const BETA: f64 = BETA_F64;
+    const INV_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
+    const FRAC_1_SQRT_2: f64 = std::f64::consts::FRAC_1_SQRT_2;
+    const T_CLAMP: f64 = 40.0;
+    const INV_FACT_EVEN: [f64; 6] = [
+        1.0,
+        1.0 / 2.0,
+        1.0 / 24.0,
+        1.0 / 720.0,
+        1.0 / 40320.0,
+        1.0 / 3628800.0,
+    ];
+    const BIG: f64 = 1e300;
+    const KAPPA: f64 = 1e-16;
+    const S_MIN: f64 = 1e-300;
+
+    /// `libm::erfc` (musl's port of the Sun/FreeBSD `s_erf.c`, error below 1 ulp). Not
+    /// `statrs::function::erf::erfc`: statrs 0.19 writes the float-exact offsets of Boost's
+    /// rational approximations as 10-digit f64 literals and is off by ~1e-11 for arguments
+    /// >= 0.5 (e.g. Phi(1) by 1.4e-11; see the tests).
+    #[inline]
+    fn erfc(x: f64) -> f64 {
+        libm::erfc(x)
+    }
+
+    #[inline]
+    fn lit(x: f64) -> f64 {
+        x
+    }
+}
+
+impl PulseFloat for f32 {
+    const ALPHA: f32 = ALPHA_F32;
+    const BETA: f32 = BETA_F32;
+    const INV_SQRT_2PI: f32 = 0.3989423;
+    const FRAC_1_SQRT_2: f32 = std::f32::consts::FRAC_1_SQRT_2;
+    const T_CLAMP: f32 = 40.0;
+    const INV_FACT_EVEN: [f32; 6] = [
+        1.0,
+        0.5,
+        0.041666668,
+        0.0013888889,
+        2.4801588e-5,
+        2.755732e-7,
+    ];
+    const BIG: f32 = 1e30;
+    const KAPPA: f32 = 1e-9;
+    const S_MIN: f32 = 1e-30;
+
+    /// [`erfc_f32`], as the WGSL's.
+    #[inline]
+    fn erfc(x: f32) -> f32 {
+        erfc_f32(x)
+    }
+
+    #[inline]
+    fn lit(x: f64) -> f32 {
+        x as f32
+    }
+}
+
+/// Complementary error function in f32: Numerical Recipes' `erfcc` (a Chebyshev fit with
+/// fractional error below 1.2e-7 for all x in exact arithmetic), evaluated in f32. Measured in
+/// the tests against libm's f64 erfc: relative error below 3.5e-7 on [0, 1] and below
+/// 3.5e-7 (1 + x^2) on [0, 9] (the f32 rounding of x^2 inside the exponential), absolute
+/// error below 3.5e-7 for x < 0.
+pub fn erfc_f32(x: f32) -> f32 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let poly = -1.2655122
+        + t * (1.0000237
+            + t * (0.37409195
+                + t * (0.09678418
+                    + t * (-0.18628806
+                        + t * (0.27886808
+                            + t * (-1.135204
+                                + t * (1.4885159 + t * (-0.82215226 + t * 0.17087276))))))));
+    let r = t * (-z * z + poly).exp();
+    if x >= 0.0 {
+        r
+    } else {
+        2.0 - r
+    }
+}
+
+/// Standard normal CDF, `erfc(-x/sqrt 2)/2` with the type's erfc ([`PulseFloat::erfc`]).
+#[inline]
+fn norm_cdf_t<T: PulseFloat>(x: T) -> T {
+    T::lit(0.5) * T::erfc(-x * T::FRAC_1_SQRT_2)
+}
+
+/// Standard normal density.
+#[inline]
+fn norm_pdf_t<T: PulseFloat>(x: T) -> T {
+    T::INV_SQRT_2PI * (T::lit(-0.5) * x * x).exp()
+}
+
+/// Standard normal CDF in f64, `erfc(-x/sqrt 2)/2` with `libm::erfc` (see
+/// [`PulseFloat::erfc`] of `f64`).
 pub fn norm_cdf(x: f64) -> f64 {
-    0.5 * erfc(-x * std::f64::consts::FRAC_1_SQRT_2)
+    norm_cdf_t(x)
 }
 
 /// Standard normal density.
 pub fn norm_pdf(x: f64) -> f64 {
-    INV_SQRT_2PI * (-0.5 * x * x).exp()
+    norm_pdf_t(x)
 }
 
-fn q64(t: f64) -> f64 {
-    let y = t.abs().min(T_CLAMP);
-    0.5 * ((y * y + 1.0) * norm_cdf(-y) - y * norm_pdf(y))
+/// Standard normal CDF in f32 from [`erfc_f32`].
+pub fn norm_cdf_f32(x: f32) -> f32 {
+    norm_cdf_t(x)
 }
 
-fn e1_64(t: f64) -> f64 {
-    let y = t.abs().min(T_CLAMP);
-    norm_pdf(y) - y * norm_cdf(-y)
+/// Standard normal density in f32.
+pub fn norm_pdf_f32(x: f32) -> f32 {
+    norm_pdf_t(x)
 }
 
-fn e2_64(t: f64) -> f64 {
-    if t <= 0.0 {
-        q64(t)
+fn q<T: PulseFloat>(t: T) -> T {
+    let y = t.abs().min(T::T_CLAMP);
+    T::lit(0.5) * ((y * y + T::one()) * norm_cdf_t(-y) - y * norm_pdf_t(y))
+}
+
+fn e1<T: PulseFloat>(t: T) -> T {
+    let y = t.abs().min(T::T_CLAMP);
+    norm_pdf_t(y) - y * norm_cdf_t(-y)
+}
+
+fn e2<T: PulseFloat>(t: T) -> T {
+    if t <= T::zero() {
+        q(t)
     } else {
-        0.5 - q64(t)
+        T::lit(0.5) - q(t)
     }
 }
 
 /// CDF of the trapezoid `box_a * box_b` (any consistent units), `a >= b > 0`.
-fn trap64(y: f64, a: f64, b: f64) -> f64 {
-    let h1 = 0.5 * (a + b);
-    let h2 = 0.5 * (a - b);
+fn trap<T: PulseFloat>(y: T, a: T, b: T) -> T {
+    let h1 = T::lit(0.5) * (a + b);
+    let h2 = T::lit(0.5) * (a - b);
     if y <= -h1 {
-        0.0
+        T::zero()
     } else if y <= -h2 {
         let z = y + h1;
-        z * z / (2.0 * a * b)
+        z * z / (T::lit(2.0) * a * b)
     } else if y <= h2 {
-        (y + 0.5 * a) / a
+        (y + T::lit(0.5) * a) / a
     } else if y < h1 {
         let z = h1 - y;
-        1.0 - z * z / (2.0 * a * b)
+        T::one() - z * z / (T::lit(2.0) * a * b)
     } else {
-        1.0
+        T::one()
     }
 }
 
 /// `He_0..=He_9` at `y` by the recurrence.
-fn hermite64(y: f64) -> [f64; 10] {
-    let mut he = [0.0; 10];
-    he[0] = 1.0;
+fn hermite<T: PulseFloat>(y: T) -> [T; 10] {
+    let mut he = [T::zero(); 10];
+    he[0] = T::one();
     he[1] = y;
     for n in 1..9 {
-        he[n + 1] = y * he[n] - n as f64 * he[n - 1];
+        he[n + 1] = y * he[n] - T::lit(n as f64) * he[n - 1];
     }
     he
 }
 
 /// `mu_{2k}(w) = (w/2)^{2k}/(2k+1)` for k = 0..=5.
-fn box_moments64(w: f64) -> [f64; 6] {
-    let u = 0.25 * w * w;
-    let mut m = [1.0; 6];
-    let mut p = 1.0;
+fn box_moments<T: PulseFloat>(w: T) -> [T; 6] {
+    let u = T::lit(0.25) * w * w;
+    let mut m = [T::one(); 6];
+    let mut p = T::one();
     for (k, mk) in m.iter_mut().enumerate().skip(1) {
-        p *= u;
-        *mk = p / (2 * k + 1) as f64;
+        p = p * u;
+        *mk = p / T::lit((2 * k + 1) as f64);
     }
     m
 }
 
-const INV_FACT_EVEN: [f64; 6] = [
-    1.0,
-    1.0 / 2.0,
-    1.0 / 24.0,
-    1.0 / 720.0,
-    1.0 / 40320.0,
-    1.0 / 3628800.0,
-];
-
 /// C in sigma units, `aa >= bb >= 0`.
-fn cdf_std64(y: f64, aa: f64, bb: f64) -> f64 {
-    if aa < ALPHA_F64 {
-        let y = y.clamp(-T_CLAMP, T_CLAMP);
-        let ma = box_moments64(aa);
-        let mb = box_moments64(bb);
+fn cdf_std<T: PulseFloat>(y: T, aa: T, bb: T) -> T {
+    let c = T::lit;
+    let inv_fact = T::INV_FACT_EVEN;
+    if aa < T::ALPHA {
+        let y = y.clamp(-T::T_CLAMP, T::T_CLAMP);
+        let ma = box_moments(aa);
+        let mb = box_moments(bb);
         let m2 = ma[1] + mb[1];
-        let m4 = ma[2] + 6.0 * ma[1] * mb[1] + mb[2];
-        let m6 = ma[3] + 15.0 * (ma[2] * mb[1] + ma[1] * mb[2]) + mb[3];
-        let m8 = ma[4] + 28.0 * (ma[3] * mb[1] + ma[1] * mb[3]) + 70.0 * ma[2] * mb[2] + mb[4];
+        let m4 = ma[2] + c(6.0) * ma[1] * mb[1] + mb[2];
+        let m6 = ma[3] + c(15.0) * (ma[2] * mb[1] + ma[1] * mb[2]) + mb[3];
+        let m8 =
+            ma[4] + c(28.0) * (ma[3] * mb[1] + ma[1] * mb[3]) + c(70.0) * ma[2] * mb[2] + mb[4];
         let m10 = ma[5]
-            + 45.0 * (ma[4] * mb[1] + ma[1] * mb[4])
-            + 210.0 * (ma[3] * mb[2] + ma[2] * mb[3])
+            + c(45.0) * (ma[4] * mb[1] + ma[1] * mb[4])
+            + c(210.0) * (ma[3] * mb[2] + ma[2] * mb[3])
             + mb[5];
-        let he = hermite64(y);
-        let s = m2 * INV_FACT_EVEN[1] * he[1]
-            + m4 * INV_FACT_EVEN[2] * he[3]
-            + m6 * INV_FACT_EVEN[3] * he[5]
-            + m8 * INV_FACT_EVEN[4] * he[7]
-            + m10 * INV_FACT_EVEN[5] * he[9];
-        norm_cdf(y) - norm_pdf(y) * s
-    } else if bb < BETA_F64 {
-        let yp = y + 0.5 * aa;
-        let ym = y - 0.5 * aa;
-        let fa = (yp / aa).clamp(0.0, 1.0) + (e1_64(yp) - e1_64(ym)) / aa;
-        let mb = box_moments64(bb);
-        let tp = yp.clamp(-T_CLAMP, T_CLAMP);
-        let tm = ym.clamp(-T_CLAMP, T_CLAMP);
-        let (hp, hm) = (hermite64(tp), hermite64(tm));
-        let (pp, pm) = (norm_pdf(tp), norm_pdf(tm));
-        let mut s = 0.0;
+        let he = hermite(y);
+        let s = m2 * inv_fact[1] * he[1]
+            + m4 * inv_fact[2] * he[3]
+            + m6 * inv_fact[3] * he[5]
+            + m8 * inv_fact[4] * he[7]
+            + m10 * inv_fact[5] * he[9];
+        norm_cdf_t(y) - norm_pdf_t(y) * s
+    } else if bb < T::BETA {
+        let yp = y + c(0.5) * aa;
+        let ym = y - c(0.5) * aa;
+        let fa = (yp / aa).clamp(T::zero(), T::one()) + (e1(yp) - e1(ym)) / aa;
+        let mb = box_moments(bb);
+        let tp = yp.clamp(-T::T_CLAMP, T::T_CLAMP);
+        let tm = ym.clamp(-T::T_CLAMP, T::T_CLAMP);
+        let (hp, hm) = (hermite(tp), hermite(tm));
+        let (pp, pm) = (norm_pdf_t(tp), norm_pdf_t(tm));
+        let mut s = T::zero();
         for k in 1..=5 {
-            s += mb[k] * INV_FACT_EVEN[k] * (hp[2 * k - 2] * pp - hm[2 * k - 2] * pm);
+            s = s + mb[k] * inv_fact[k] * (hp[2 * k - 2] * pp - hm[2 * k - 2] * pm);
         }
         fa + s / aa
     } else {
-        let h1 = 0.5 * (aa + bb);
-        let h2 = 0.5 * (aa - bb);
-        let d = (e2_64(y + h1) - e2_64(y + h2)) - (e2_64(y - h2) - e2_64(y - h1));
-        trap64(y, aa, bb) + d / (aa * bb)
+        let h1 = c(0.5) * (aa + bb);
+        let h2 = c(0.5) * (aa - bb);
+        let d = (e2(y + h1) - e2(y + h2)) - (e2(y - h2) - e2(y - h1));
+        trap(y, aa, bb) + d / (aa * bb)
     }
+}
+
+/// CDF at `x` of a centred Gaussian pulse of standard deviation `sigma` convolved with boxes
+/// of widths `a` and `b` (all in range units; the widths' signs are ignored), in `T`: the
+/// formulas of the [module docs](self) with `T`'s regime switches, inputs clamped
+/// (`|x|` and the widths to [`PulseFloat::BIG`], `s = max(sigma, KAPPA max(|x|, a, b),
+/// S_MIN)`). [`cdf_gauss_box2`] (f64) and [`cdf_gauss_box2_f32`] have the measured errors.
+pub fn cdf_gauss_box2_generic<T: PulseFloat>(x: T, sigma: T, a: T, b: T) -> T {
+    let x = x.clamp(-T::BIG, T::BIG);
+    let a = a.abs().min(T::BIG);
+    let b = b.abs().min(T::BIG);
+    let m = x.abs().max(a).max(b);
+    let s = sigma.max(T::KAPPA * m).max(T::S_MIN);
+    let (aa, bb) = if a >= b {
+        (a / s, b / s)
+    } else {
+        (b / s, a / s)
+    };
+    cdf_std(x / s, aa, bb)
 }
 
 /// CDF at `x` of a centred Gaussian pulse of standard deviation `sigma` convolved with boxes
@@ -238,17 +386,7 @@ fn cdf_std64(y: f64, aa: f64, bb: f64) -> f64 {
 /// corners; jumps at the regime switches <= 1.6e-15. See the [module docs](self) for the
 /// formulas. `sigma = 0` gives the trapezoid CDF; infinite `x` gives 0 or 1.
 pub fn cdf_gauss_box2(x: f64, sigma: f64, a: f64, b: f64) -> f64 {
-    let x = x.clamp(-1e300, 1e300);
-    let a = a.abs().min(1e300);
-    let b = b.abs().min(1e300);
-    let m = x.abs().max(a).max(b);
-    let s = sigma.max(1e-16 * m).max(1e-300);
-    let (aa, bb) = if a >= b {
-        (a / s, b / s)
-    } else {
-        (b / s, a / s)
-    };
-    cdf_std64(x / s, aa, bb)
+    cdf_gauss_box2_generic(x, sigma, a, b)
 }
 
 /// Bin weights of one pixel for a Gaussian pulse: `out[k] = C(edges[k+1] - r0) -
@@ -297,157 +435,8 @@ pub fn bin_weights_folded(
     }
 }
 
-// ---------------------------------------------------------------------------------------
-// f32 twin (the formulas of shaders/pulse.wgsl)
-// ---------------------------------------------------------------------------------------
-
-const INV_SQRT_2PI_F32: f32 = 0.3989423;
-const T_CLAMP_F32: f32 = 40.0;
-
-/// Complementary error function in f32: Numerical Recipes' `erfcc` (a Chebyshev fit with
-/// fractional error below 1.2e-7 for all x in exact arithmetic), evaluated in f32. Measured in
-/// the tests against libm's f64 erfc: relative error below 3.5e-7 on [0, 1] and below
-/// 3.5e-7 (1 + x^2) on [0, 9] (the f32 rounding of x^2 inside the exponential), absolute
-/// error below 3.5e-7 for x < 0.
-pub fn erfc_f32(x: f32) -> f32 {
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let poly = -1.2655122
-        + t * (1.0000237
-            + t * (0.37409195
-                + t * (0.09678418
-                    + t * (-0.18628806
-                        + t * (0.27886808
-                            + t * (-1.135204
-                                + t * (1.4885159 + t * (-0.82215226 + t * 0.17087276))))))));
-    let r = t * (-z * z + poly).exp();
-    if x >= 0.0 {
-        r
-    } else {
-        2.0 - r
-    }
-}
-
-/// Standard normal CDF in f32 from [`erfc_f32`].
-pub fn norm_cdf_f32(x: f32) -> f32 {
-    0.5 * erfc_f32(-x * std::f32::consts::FRAC_1_SQRT_2)
-}
-
-/// Standard normal density in f32.
-pub fn norm_pdf_f32(x: f32) -> f32 {
-    INV_SQRT_2PI_F32 * (-0.5 * x * x).exp()
-}
-
-fn q32(t: f32) -> f32 {
-    let y = t.abs().min(T_CLAMP_F32);
-    0.5 * ((y * y + 1.0) * norm_cdf_f32(-y) - y * norm_pdf_f32(y))
-}
-
-fn e1_32(t: f32) -> f32 {
-    let y = t.abs().min(T_CLAMP_F32);
-    norm_pdf_f32(y) - y * norm_cdf_f32(-y)
-}
-
-fn e2_32(t: f32) -> f32 {
-    if t <= 0.0 {
-        q32(t)
-    } else {
-        0.5 - q32(t)
-    }
-}
-
-fn trap32(y: f32, a: f32, b: f32) -> f32 {
-    let h1 = 0.5 * (a + b);
-    let h2 = 0.5 * (a - b);
-    if y <= -h1 {
-        0.0
-    } else if y <= -h2 {
-        let z = y + h1;
-        z * z / (2.0 * a * b)
-    } else if y <= h2 {
-        (y + 0.5 * a) / a
-    } else if y < h1 {
-        let z = h1 - y;
-        1.0 - z * z / (2.0 * a * b)
-    } else {
-        1.0
-    }
-}
-
-fn hermite32(y: f32) -> [f32; 10] {
-    let mut he = [0.0f32; 10];
-    he[0] = 1.0;
-    he[1] = y;
-    for n in 1..9 {
-        he[n + 1] = y * he[n] - n as f32 * he[n - 1];
-    }
-    he
-}
-
-fn box_moments32(w: f32) -> [f32; 6] {
-    let u = 0.25 * w * w;
-    let mut m = [1.0f32; 6];
-    let mut p = 1.0f32;
-    for (k, mk) in m.iter_mut().enumerate().skip(1) {
-        p *= u;
-        *mk = p / (2 * k + 1) as f32;
-    }
-    m
-}
-
-const INV_FACT_EVEN_F32: [f32; 6] = [
-    1.0,
-    0.5,
-    0.041666668,
-    0.0013888889,
-    2.4801588e-5,
-    2.755732e-7,
-];
-
-fn cdf_std32(y: f32, aa: f32, bb: f32) -> f32 {
-    if aa < ALPHA_F32 {
-        let y = y.clamp(-T_CLAMP_F32, T_CLAMP_F32);
-        let ma = box_moments32(aa);
-        let mb = box_moments32(bb);
-        let m2 = ma[1] + mb[1];
-        let m4 = ma[2] + 6.0 * ma[1] * mb[1] + mb[2];
-        let m6 = ma[3] + 15.0 * (ma[2] * mb[1] + ma[1] * mb[2]) + mb[3];
-        let m8 = ma[4] + 28.0 * (ma[3] * mb[1] + ma[1] * mb[3]) + 70.0 * ma[2] * mb[2] + mb[4];
-        let m10 = ma[5]
-            + 45.0 * (ma[4] * mb[1] + ma[1] * mb[4])
-            + 210.0 * (ma[3] * mb[2] + ma[2] * mb[3])
-            + mb[5];
-        let he = hermite32(y);
-        let s = m2 * INV_FACT_EVEN_F32[1] * he[1]
-            + m4 * INV_FACT_EVEN_F32[2] * he[3]
-            + m6 * INV_FACT_EVEN_F32[3] * he[5]
-            + m8 * INV_FACT_EVEN_F32[4] * he[7]
-            + m10 * INV_FACT_EVEN_F32[5] * he[9];
-        norm_cdf_f32(y) - norm_pdf_f32(y) * s
-    } else if bb < BETA_F32 {
-        let yp = y + 0.5 * aa;
-        let ym = y - 0.5 * aa;
-        let fa = (yp / aa).clamp(0.0, 1.0) + (e1_32(yp) - e1_32(ym)) / aa;
-        let mb = box_moments32(bb);
-        let tp = yp.clamp(-T_CLAMP_F32, T_CLAMP_F32);
-        let tm = ym.clamp(-T_CLAMP_F32, T_CLAMP_F32);
-        let (hp, hm) = (hermite32(tp), hermite32(tm));
-        let (pp, pm) = (norm_pdf_f32(tp), norm_pdf_f32(tm));
-        let mut s = 0.0f32;
-        for k in 1..=5 {
-            s += mb[k] * INV_FACT_EVEN_F32[k] * (hp[2 * k - 2] * pp - hm[2 * k - 2] * pm);
-        }
-        fa + s / aa
-    } else {
-        let h1 = 0.5 * (aa + bb);
-        let h2 = 0.5 * (aa - bb);
-        let d = (e2_32(y + h1) - e2_32(y + h2)) - (e2_32(y - h2) - e2_32(y - h1));
-        trap32(y, aa, bb) + d / (aa * bb)
-    }
-}
-
 /// f32 twin of [`cdf_gauss_box2`], the exact formulas of `pulse_cdf_gauss_box2` in
-/// `shaders/pulse.wgsl` (no f64 inside). Regimes as in the [module docs](self) with
+/// `shaders/shared/pulse.wgsl` (no f64 inside). Regimes as in the [module docs](self) with
 /// [`ALPHA_F32`], [`BETA_F32`]; inputs are clamped (`|x| <= 1e30`, widths `<= 1e30`,
 /// `s = max(sigma, 1e-9 max(|x|, a, b), 1e-30)`) so that no NaN or infinity can arise,
 /// also for `sigma = 0`, `a = b = 0` or `x = +-f32::MAX`.
@@ -461,17 +450,7 @@ fn cdf_std32(y: f32, aa: f32, bb: f32) -> f32 {
 /// Not counted: the rounding of `x` itself to f32 (the renderer's `e_k - r0`), which costs
 /// up to `ulp(x) * max density <= ulp(x) / max(a, sigma sqrt(2 pi))`.
 pub fn cdf_gauss_box2_f32(x: f32, sigma: f32, a: f32, b: f32) -> f32 {
-    let x = x.clamp(-1e30, 1e30);
-    let a = a.abs().min(1e30);
-    let b = b.abs().min(1e30);
-    let m = x.abs().max(a).max(b);
-    let s = sigma.max(1e-9 * m).max(1e-30);
-    let (aa, bb) = if a >= b {
-        (a / s, b / s)
-    } else {
-        (b / s, a / s)
-    };
-    cdf_std32(x / s, aa, bb)
+    cdf_gauss_box2_generic(x, sigma, a, b)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -722,7 +701,7 @@ impl SampledPulse {
         if b > kdt {
             let d = (self.e2_at(x + h1) - self.e2_at(x + h2))
                 - (self.e2_at(x - h2) - self.e2_at(x - h1));
-            trap64(x - self.mu, a, b) + d / (a * b)
+            trap(x - self.mu, a, b) + d / (a * b)
         } else if a > kdt {
             let fa = |y: f64| {
                 ((y - self.mu + 0.5 * a) / a).clamp(0.0, 1.0)
@@ -992,14 +971,15 @@ mod tests {
         for bb in [0.0, 0.01, 0.06, ALPHA_F64] {
             let j = max_jump(|y, hi| {
                 let aa = if hi { ALPHA_F64 } else { lo(ALPHA_F64) };
-                cdf_std64(y, aa, bb.min(aa))
+                cdf_std::<f64>(y, aa, bb.min(aa))
             });
             eprintln!("f64 A = ALPHA, B = {bb}: jump {j:.2e}");
             worst = worst.max(j);
         }
         // B crosses BETA (series in B <-> trapezoid + second difference).
         for aa in [BETA_F64, 0.5, 1.0, 10.0, 1e4] {
-            let j = max_jump(|y, hi| cdf_std64(y, aa, if hi { BETA_F64 } else { lo(BETA_F64) }));
+            let j =
+                max_jump(|y, hi| cdf_std::<f64>(y, aa, if hi { BETA_F64 } else { lo(BETA_F64) }));
             eprintln!("f64 B = BETA, A = {aa}: jump {j:.2e}");
             worst = worst.max(j);
         }
@@ -1010,14 +990,14 @@ mod tests {
         for bb in [0.0f32, 0.05, 0.3, ALPHA_F32] {
             let j = max_jump(|y, hi| {
                 let aa = if hi { ALPHA_F32 } else { lo32(ALPHA_F32) };
-                cdf_std32(y as f32, aa, bb.min(aa)) as f64
+                cdf_std::<f32>(y as f32, aa, bb.min(aa)) as f64
             });
             eprintln!("f32 A = ALPHA, B = {bb}: jump {j:.2e}");
             worst32 = worst32.max(j);
         }
         for aa in [BETA_F32, 2.0, 10.0, 1e4] {
             let j = max_jump(|y, hi| {
-                cdf_std32(y as f32, aa, if hi { BETA_F32 } else { lo32(BETA_F32) }) as f64
+                cdf_std::<f32>(y as f32, aa, if hi { BETA_F32 } else { lo32(BETA_F32) }) as f64
             });
             eprintln!("f32 B = BETA, A = {aa}: jump {j:.2e}");
             worst32 = worst32.max(j);
@@ -1110,6 +1090,114 @@ mod tests {
         assert!(worst < MEASURED_F32_BOUND, "{worst:e} at {at:?}");
     }
 
+    /// FNV-1a over the bits of `f` at the inputs of [`cdf_inputs`].
+    fn bits_hash<T: Copy>(
+        xs: &[[f64; 4]],
+        f: impl Fn([f64; 4]) -> T,
+        bits: impl Fn(T) -> u64,
+    ) -> u64 {
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        for &x in xs {
+            for byte in bits(f(x)).to_le_bytes() {
+                h = (h ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
+            }
+        }
+        h
+    }
+
+    /// `(x, sigma, a, b)`: the grid of `f32_twin_error_grid`, random arguments over many
+    /// decades in every regime, and extremes (zero widths and sigma, huge and infinite x).
+    fn cdf_inputs() -> Vec<[f64; 4]> {
+        let mut v = vec![];
+        for sigma in [1.0f64, 0.37] {
+            for wa in WIDTHS {
+                for wb in WIDTHS {
+                    let (a, b) = (wa * sigma, wb * sigma);
+                    for x in x_grid(sigma, a, b, 41) {
+                        v.push([x, sigma, a, b]);
+                    }
+                }
+            }
+        }
+        let mut rng = crate::reference::rng::Rng::new(7, &[]);
+        let mut rnd = || rng.uniform();
+        for i in 0..100_000 {
+            let sigma = if i % 97 == 0 {
+                0.0
+            } else {
+                10f64.powf(-3.0 + 6.0 * rnd())
+            };
+            let mut w = || match (rnd() * 8.0) as u32 {
+                0 => 0.0,
+                _ => sigma.max(1e-3) * 10f64.powf(-6.0 + 11.0 * rnd()),
+            };
+            let (a, b) = (w(), w());
+            let x = (2.0 * rnd() - 1.0) * (0.5 * (a + b) + 12.0 * sigma);
+            v.push([x, sigma, a, b]);
+        }
+        for x in [0.0, 1e-30, 1.0, 1e30, 3e38, 1e300, f64::MAX, f64::INFINITY] {
+            for x in [x, -x] {
+                for s in [0.0, 1e-40, 1e-20, 1.0, 1e20] {
+                    for (a, b) in [(0.0, 0.0), (1.0, 0.0), (0.3, 2.0), (1e20, 1e19)] {
+                        v.push([x, s, a, b]);
+                    }
+                }
+            }
+        }
+        v
+    }
+
+    /// The f64 reference and the f32 twin (which the WGSL port follows) return the same
+    /// bits as before they were written once, generically (issue 22): FNV-1a hashes of
+    /// their results over [`cdf_inputs`], recorded from the separate f64 and f32 code.
+    /// A deliberate change of either formula must record new values here.
+    #[test]
+    fn cdf_bits_unchanged() {
+        let xs = cdf_inputs();
+        let h64 = bits_hash(&xs, |[x, s, a, b]| cdf_gauss_box2(x, s, a, b), f64::to_bits);
+        let h32 = bits_hash(
+            &xs,
+            |[x, s, a, b]| cdf_gauss_box2_f32(x as f32, s as f32, a as f32, b as f32),
+            |c| c.to_bits() as u64,
+        );
+        let ts: Vec<[f64; 4]> = (-4000..=4000)
+            .map(|i| [i as f64 * 0.0025, 0.0, 0.0, 0.0])
+            .collect();
+        let hn64 = bits_hash(
+            &ts,
+            |[t, ..]| [norm_cdf(t), norm_pdf(t)],
+            |[c, p]| c.to_bits() ^ p.to_bits().rotate_left(17),
+        );
+        let hn32 = bits_hash(
+            &ts,
+            |[t, ..]| {
+                [
+                    norm_cdf_f32(t as f32),
+                    norm_pdf_f32(t as f32),
+                    erfc_f32(t as f32),
+                ]
+            },
+            |[c, p, e]| {
+                c.to_bits() as u64
+                    ^ (p.to_bits() as u64) << 32
+                    ^ (e.to_bits() as u64).rotate_left(17)
+            },
+        );
+        eprintln!(
+            "{} inputs: {h64:#018x} {h32:#018x} {hn64:#018x} {hn32:#018x}",
+            xs.len()
+        );
+        assert_eq!(
+            [h64, h32, hn64, hn32],
+            [
+                0x9e252257be4a7dfd,
+                0xa20aa80623d9f9f6,
+                0xb732c97dbcb356aa,
+                0x2d75bad78568126e
+            ]
+        );
+    }
+
     /// The bound quoted in the docs of [`cdf_gauss_box2_f32`].
     const MEASURED_F32_BOUND: f64 = 2.5e-7;
 
@@ -1155,7 +1243,7 @@ mod tests {
 
     #[test]
     fn wgsl_parses_and_validates() {
-        let src = include_str!("../../shaders/pulse.wgsl");
+        let src = crate::render::shaders::PULSE;
         let module = naga::front::wgsl::parse_str(src).expect("pulse.wgsl parses");
         naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),

@@ -47,7 +47,8 @@ pub struct BrdfTableOptions {
     /// Evaluate the single term ([`SingleParams`]) and the multiple + diffuse terms
     /// ([`LambertianParams`]) per lookup from the material's parameters and 1D tables (in
     /// the kernel: `add_single_in_kernel`, `add_lambertian_in_kernel` in
-    /// `shaders/shade.wgsl`) instead of tabulating them; the double bounce stays tabulated.
+    /// `shaders/shared/in_kernel.wgsl`) instead of tabulating them; the double bounce stays
+    /// tabulated.
     pub in_shader: bool,
 }
 

@@ -80,7 +80,7 @@ impl LambertianParams {
         self.terms.iter().map(|(_, c)| c).sum()
     }
 
-    /// The words the kernel reads (`add_lambertian_in_kernel` in `shaders/shade.wgsl`):
+    /// The words the kernel reads (`add_lambertian_in_kernel`, `shaders/shared/in_kernel.wgsl`):
     /// `[1 (the kind; u32 bits), table scale, terms (u32 bits)]`, then per term
     /// `[c, s_f (0: the table is in z), intervals (u32 bits), its n + 1 values]`.
     pub fn words(&self) -> Vec<f32> {
@@ -168,7 +168,7 @@ impl SingleParams {
             .reduce(|| 0.0, f64::max)
     }
 
-    /// The words the kernel reads (`add_single_in_kernel` in `shaders/shade.wgsl`):
+    /// The words the kernel reads (`add_single_in_kernel`, `shaders/shared/in_kernel.wgsl`):
     /// `[0 (the kind; u32 bits), distribution (0 Blinn-Phong, 1 Beckmann, 2 GGX; u32
     /// bits), m or alpha, perfect conductor (u32 bits), n - 1, k, excess table scale,
     /// correlation (0 none, 1 seed, 2 APS; u32 bits), intervals of the excess table (u32

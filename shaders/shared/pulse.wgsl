@@ -1,9 +1,10 @@
 // Pulse (Gaussian) convolved with a pixel's trapezoidal range footprint: its CDF.
 //
-// A line-by-line port of the f32 twin `cdf_gauss_box2_f32` in src/render/pulse.rs (same
-// constants, same branches, same order of operations); the formulas and the measured error
-// are documented there. Plain functions only (no bindings, no entry point): concatenate this
-// file into the profile kernel and call
+// A line-by-line port of the f32 twin `cdf_gauss_box2_f32` in src/render/pulse.rs (the f32
+// instance of `cdf_gauss_box2_generic`: same constants, same branches, same order of
+// operations); the formulas and the measured error are documented there. Plain functions only (no bindings, no entry point; the constants
+// are checked against the Rust ones by a test in src/render/shaders.rs): shade.wgsl includes
+// this file (`//#include "shared/pulse.wgsl"`) and calls
 //
 //   pulse_cdf_gauss_box2(x, sigma, a, b)
 //
