@@ -10,7 +10,7 @@
 // as u32 triangle ids + 1 (exact: ids < 2^24 as f32), into the attitude's slot of the
 // `ids` buffer that the shade kernel reads (shade.wgsl, sample_id):
 //   ids[((layer P + p) side^2 + y side + x) 4 + s] = sample s of texel (x, y) of tile p.
-// CPU twin: the identity; render::twin::visibility casts the samples' rays directly, and
+// CPU twin: the identity; render::cpu::visibility casts the samples' rays directly, and
 // render::gpu tests compare the whole chain (samples_kernel_matches_twin).
 
 struct Gather {

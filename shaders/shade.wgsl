@@ -12,15 +12,15 @@
 // (shared/pulse.wgsl), and adds the workgroup's sum to the total.
 // Profile and total are accumulated in 64-bit fixed point (two u32 words, integer atomics):
 // each addition is rounded to the nearest quantum (2^-40 of the largest value a pixel could
-// take, see render() in src/render/gpu.rs), and the sums are then exact and
+// take, see the fixed-point scale in src/render/gpu/plan.rs), and the sums are then exact and
 // order-independent, so results do not depend on scheduling.
-// Conventions: src/render/mod.rs. CPU twin: render::twin::shade_pixel.
+// Conventions: src/render/mod.rs. CPU twin: render::cpu::shade_pixel.
 //
 // Transmitter cast shadows (SHADOWS: set when the bistatic angle beta > 0; monostatic the
 // receiver's visibility already implies illumination and the test is compiled out). A
 // second raster pass wrote the triangle seen from the transmitter at each texel centre
 // (`tx_ids`: the same orthographic square [-ext, ext]^2 at `tx_width` texels a side, twice
-// the receiver's up to 4096 (src/render/gpu.rs, transmitter_map_width); rotation
+// the receiver's up to 4096 (src/render/gpu/plan.rs, transmitter_map_width); rotation
 // R_tx = R_y(-beta) R, so wi maps to +z). A point p (the pixel's shaded point on its
 // visible triangle T, tested only when cos_i > 0 and cos_o > 0) is projected to the
 // transmitter frame, q = R_y(-beta) p, and the distinct triangles U != T of the 3x3 texels
@@ -46,7 +46,7 @@
 // all nine texels inside the occluder, so such misses are light leaking through within a
 // texel of a shadow's edge or along thin shadows; occluders within eps_z of p in depth
 // are ignored; shading normals do not enter (the test is geometric).
-// CPU twin: render::twin::shadowed (exact f64 ray casting, independent of this rule).
+// CPU twin: render::cpu::shadowed (exact f64 ray casting, independent of this rule).
 //
 // Assembled by src/render/shaders.rs: each `//#include "shared/NAME.wgsl"` line below is
 // replaced by that file (WGSL declarations may come in any order). The shared files use
@@ -64,7 +64,7 @@ override WRITE_TOTAL: bool = true;
 override WRITE_FOOTPRINT: bool = false;
 override SHADOWS: bool = false;    // transmitter cast shadows (beta > 0), see above
 // Mueller elements to look up (bit 4 i + j: M_ij in the table frame); the others are left
-// zero. Set from what the output needs (SensorSetup::element_mask in src/render/gpu.rs:
+// zero. Set from what the output needs (SensorSetup::element_mask in src/render/api.rs:
 // an unpolarized transmitter's intensity needs M00 alone).
 override ELEMENT_MASK: u32 = 0xffffu;
 // Visibility samples per pixel K (SensorSetup::samples; a constant so that K = 1 compiles
@@ -196,7 +196,7 @@ fn fixed_add(buf_index: u32, v: f32, is_total: bool) {
 // the differential cross-section of a whole pixel there (Mueller, or Stokes/intensity for
 // CHANNELS < 16; zero where unlit or shadowed) to `out` and returns (r0, a, b, hit): the
 // range, the pixel's footprint widths, and 1 if the triangle is not degenerate in
-// projection (else 0, and nothing is written). Twin: render::twin::shade_point.
+// projection (else 0, and nothing is written). Twin: render::cpu::shade_point.
 fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32, 16>>) -> vec4<f32> {
     var hit = vec4<f32>(0.0);
     let rot = rotations[layer];
@@ -401,7 +401,7 @@ struct PixelAcc {
 // Shade one part of pixel (col, row) (a triangle, the fraction of the pixel it covers, the
 // point in the pixel where it is shaded and the extent of the pixel it spans), add it to
 // the pixel's values `out` and to the profile, and to `acc`. Twin: the loop over parts in
-// render::twin::render_cpu.
+// render::cpu::render_cpu.
 fn shade_part(layer: u32, col: u32, row: u32, part: Part, cap: f32,
               out: ptr<function, array<f32, 16>>, acc: ptr<function, PixelAcc>) {
     let x = -params.ext + (f32(col) + part.centre.x) * params.pix;
@@ -429,7 +429,7 @@ fn shade_part(layer: u32, col: u32, row: u32, part: Part, cap: f32,
 }
 
 // The parts of pixel (col, row) of attitude `layer`, shaded into `out` (its values) and
-// `acc`. The pixel's K visibility samples (src/render/gpu.rs, sample_offsets) are grouped
+// `acc`. The pixel's K visibility samples (src/render/samples.rs, sample_offsets) are grouped
 // by the flat surface they see (the faces of a flat, finely tessellated panel form one,
 // Mesh::surfaces; each face of a smoothly shaded mesh is its own); each surface seen by c
 // of them is shaded once, on the plane of the triangle its first sample sees, at the mean
@@ -440,10 +440,10 @@ fn shade_part(layer: u32, col: u32, row: u32, part: Part, cap: f32,
 // whose samples all see one surface is shaded at its centre (the samples' mean) for its
 // whole area: exactly the single-sample result. With COVERAGE (analytic coverage, SAMPLES = 1) the parts come from
 // coverage_parts instead: exact visible areas, each shaded at its centroid.
-// Twin: render::twin::render_cpu.
+// Twin: render::cpu::render_cpu.
 // Triangle id + 1 (0: none) seen by visibility sample k (SAMPLES > 1) of pixel (col, row)
 // of attitude `layer`: K < 4, layer l K + k of tri_ids; K >= 4 (msaa_samples in
-// src/render/gpu.rs), sample k % 4 of texel (col + 1 + dc, row + 1 + dr) of pass k / 4's
+// src/render/samples.rs), sample k % 4 of texel (col + 1 + dc, row + 1 + dr) of pass k / 4's
 // tile, as gather.wgsl stored it.
 fn sample_id(col: u32, row: u32, layer: u32, k: u32) -> u32 {
     if (SAMPLES < 4u) {

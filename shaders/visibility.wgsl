@@ -5,7 +5,7 @@
 // z toward the viewer). The image square spans
 // [-ext, ext] in x and y; depth maps z in [-ext_z, ext_z] to [1, 0] (nearest smallest).
 // The fragment writes the triangle index + 1 (0 = empty) to an R32Uint target.
-// Visibility samples (src/render/gpu.rs, sample_offsets and raster_displacements): with
+// Visibility samples (src/render/samples.rs, sample_offsets and raster_displacements): with
 // K < 4, instance l K + k draws attitude l for sample k, whose offset (u, v) in the pixel
 // (from its top-left corner, v down the rows) is moved onto the pixel centre, where the
 // rasterizer samples: the translation is ((1/2 - u) pix, (v - 1/2) pix, 0). K = 1 samples
@@ -13,7 +13,7 @@
 // of attitude l into its tile of a 4x multisampled target (MsaaTiles), moved by minus the
 // pass's shift of the standard sample positions (msaa_samples). Translations are built
 // on the host, so the vertex stage costs one affine map per vertex for any K.
-// CPU twin: `render::twin::visibility` (ray casting through the same sample points).
+// CPU twin: `render::cpu::visibility` (ray casting through the same sample points).
 
 struct Params {
     ext: f32,
@@ -46,7 +46,7 @@ fn fs_main(in: VsOut) -> @location(0) u32 {
 }
 
 // The same for the multisampled tiles of K >= 4 samples (R32Float target, see MsaaTiles
-// in src/render/gpu.rs; gathered by gather.wgsl): the index + 1 as a float, exact below 2^24.
+// in src/render/gpu/targets.rs; gathered by gather.wgsl): the index + 1 as a float, exact below 2^24.
 @fragment
 fn fs_float(in: VsOut) -> @location(0) f32 {
     return f32(in.tri);

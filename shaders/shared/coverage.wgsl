@@ -1,4 +1,4 @@
-// ---- analytic coverage (COVERAGE; twin: render::twin::coverage_parts) ----
+// ---- analytic coverage (COVERAGE; twin: render::cpu::coverage_parts) ----
 // Pixel-local coordinates: (u, v) in pixels from the pixel's top-left corner, v down the
 // rows. Polygons are convex, counter-clockwise in (u, v) as the square (0,0) (1,0) (1,1)
 // (0,1) is listed (positive shoelace area), at most CLIP_VERTS vertices (a vertex beyond
