@@ -194,7 +194,7 @@ mod tests {
             ("MAX_PARTS", gpu::MAX_PARTS as u64),
             ("HEADER_WORDS", gpu::HEADER_WORDS as u64),
             ("SHADER_PART", gpu::SHADER_PART as u64),
-            ("MAX_SAMPLES", gpu::MAX_SAMPLES as u64),
+            ("MAX_SAMPLES", crate::render::samples::MAX_SAMPLES as u64),
         ];
         for (name, want) in uints {
             assert_eq!(wgsl_uint(&value(name)), want, "{name}");

@@ -55,6 +55,7 @@ from scipy.special import gammaln, xlogy
 from scipy.spatial.transform import Rotation
 
 from .. import lidar as _lidar
+from .. import _core
 from .._core import Error, Material
 from .instrument import Instrument, Measurement, _check_edges, _check_number, _numeric_array, expected_counts
 
@@ -163,7 +164,9 @@ def _attitude_matrices(r: Any, name: str) -> np.ndarray:
         if np.any(n == 0):
             raise Error(f"invalid {name}: a zero quaternion")
         q = a / n
-        return Rotation.from_quat(q.reshape(-1, 4)[:, [1, 2, 3, 0]]).as_matrix().reshape(a.shape[:-1] + (3, 3))
+        # the one quaternion convention: the renderer's (w, x, y, z), converted in Rust
+        return np.asarray(_core.quaternions_to_rotations(np.ascontiguousarray(q.reshape(-1, 4)))).reshape(
+            a.shape[:-1] + (3, 3))
     if a.ndim < 2 or a.shape[-2:] != (3, 3):
         raise Error(f"invalid {name}: shape {a.shape}, expected (..., 3, 3) or (..., 4)")
     eye = np.einsum("...ji,...jk->...ik", a, a)
