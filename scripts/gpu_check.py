@@ -45,6 +45,9 @@ import numpy as np
 import pprender
 from pprender import materials, models
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "benchmarks"))
+from bench_render import cubesat_scene  # noqa: E402  (the same scene as the render benchmark)
+
 #: Largest allowed errors of the f32 kernel against the f64 twin (module docstring).
 LIMITS = {"total": 1e-2, "profile": 1e-2, "image_p99": 1e-3, "outliers": 2e-3}
 #: A pixel whose error exceeds this (relative to its intensity) is an outlier.
@@ -58,15 +61,9 @@ def _quaternions(n: int, seed: int) -> np.ndarray:
 
 
 def cubesat() -> pprender.Scene:
-    mesh = models.cubesat("3U")
-    terms = ("single", "double", "multiple")
-    mats = {
-        "bus": materials.get("aluminium", alpha=0.15, terms=terms),
-        "solar_cells": materials.get("fused_silica", alpha=0.05),
-        "panel_back": materials.get("white_paint"),
-        "antenna": materials.get("aluminium", alpha=0.3, terms=terms),
-    }
-    return pprender.Scene(mesh, {p: mats[p] for p in mesh.metadata["pprender_parts"]})
+    """The render benchmark's 3U CubeSat (``benchmarks/bench_render.py``): aluminium bus and
+    antenna with single + double + multiple scattering, glass-covered cells, white paint."""
+    return cubesat_scene()
 
 
 def scenes() -> list[tuple[str, pprender.Scene, dict[str, Any]]]:
