@@ -21,6 +21,9 @@ pub enum Error {
     /// No usable graphics device, or the device failed (validation, out of memory).
     #[error("device: {0}")]
     Device(String),
+    /// A render stopped because its progress callback asked it to ([`crate::render::Progress`]).
+    #[error("render cancelled by its progress callback")]
+    Cancelled,
 }
 
 impl Error {

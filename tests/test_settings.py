@@ -80,3 +80,30 @@ def test_one_render_call_crosses_into_rust_once(monkeypatch) -> None:
     assert proxy.calls == ["render", "render"]
     assert first.table_seconds > 0 and again.table_seconds == 0.0
     np.testing.assert_array_equal(first.profile, again.profile)
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(arithmetic="f64"), dict(quality="reference")])
+def test_progress_reports_and_an_exception_stops_the_render(kw) -> None:
+    """``render(progress=...)``: called with (done, total) up to (N, N) on every backend;
+    an exception raised in it stops the render and comes out of ``render``; the device and
+    the scene render normally afterwards (the GPU path's error scopes were popped)."""
+    sensor = pprender.Lidar(resolution=12, **kw)
+    q = np.tile(Q[1], (6, 1))
+    seen = []
+    full = pprender.render(SCENE, sensor, q, outputs=("profile",), progress=lambda d, t: seen.append((d, t)))
+    assert seen and seen[-1] == (6, 6) and all(t == 6 for _, t in seen)
+    if not kw:  # a device reports chunk by chunk, in order (CPU workers may report out of order)
+        assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+
+    class Stop(Exception):
+        pass
+
+    def stop(done, total):
+        raise Stop(f"{done} of {total}")
+
+    with pytest.raises(Stop):
+        pprender.render(SCENE, sensor, q, outputs=("profile",), progress=stop)
+    again = pprender.render(SCENE, sensor, q, outputs=("profile",))
+    np.testing.assert_array_equal(again.profile, full.profile)
+    with pytest.raises(pprender.Error, match="progress"):
+        pprender.render(SCENE, sensor, q, progress=3)

@@ -3,7 +3,7 @@
 # pure-Python modules that wrap these functions.
 
 from collections.abc import Sequence
-from typing import Any, final
+from typing import Callable, Any, final
 
 import numpy as np
 import numpy.typing as npt
@@ -268,6 +268,7 @@ class RenderScene:
         n_psi_double: int | None = None,
         double_order: int | None = None,
         in_shader: bool = False,
+        progress: Callable[[int, int], object] | None = None,
     ) -> dict[str, Any]: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...

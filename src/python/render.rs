@@ -191,7 +191,8 @@ impl PyRenderScene {
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope, or (n, 4) unit quaternions
     /// `(w, x, y, z)`. Returns a dict of arrays and `table_seconds`, the time spent building
-    /// the materials' tables in this call (0 when cached).
+    /// the materials' tables in this call (0 when cached). `progress(done, total)` is called
+    /// as attitudes are done; an exception it raises (or Ctrl-C) stops the render.
     /// `device = "reference"`: the f64 CPU reference (`cpu::render_reference`, exact
     /// BRDFs, no tables; the table keywords are then unused). `device = "twin"`: the
     /// kernel's f64 CPU twin with the same tables (`cpu::render_tables`).
@@ -199,7 +200,7 @@ impl PyRenderScene {
         intensity_only,
         sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
         pulse_spacing=0.0, analytic=false, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
-        n_z_double=None, n_psi_double=None, double_order=None, in_shader=false))]
+        n_z_double=None, n_psi_double=None, double_order=None, in_shader=false, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -228,6 +229,7 @@ impl PyRenderScene {
         n_psi_double: Option<usize>,
         double_order: Option<usize>,
         in_shader: bool,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let opts = table_options(
             n_z,
@@ -262,9 +264,40 @@ impl PyRenderScene {
             profile,
         };
         let mesh = self.mesh.clone();
+        // The callback runs with the GIL (from worker threads on the CPU backends). An
+        // exception it raises, or a pending KeyboardInterrupt, stops the render and is raised.
+        let raised: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+        let report = |done: usize, total: usize| -> bool {
+            Python::attach(|py| {
+                let r = py.check_signals().and_then(|()| match &progress {
+                    Some(f) => f.call1(py, (done, total)).map(|_| ()),
+                    None => Ok(()),
+                });
+                match r {
+                    Ok(()) => true,
+                    Err(e) => {
+                        raised.lock().expect("progress error").get_or_insert(e);
+                        false
+                    }
+                }
+            })
+        };
         let out = py.detach(|| {
-            request::render(&mesh, &self.tables, &opts, &sensor, &rots, outputs, backend)
-        })?;
+            request::render(
+                &mesh,
+                &self.tables,
+                &opts,
+                &sensor,
+                &rots,
+                outputs,
+                backend,
+                Some(&report),
+            )
+        });
+        if let Some(e) = raised.into_inner().expect("progress error") {
+            return Err(e);
+        }
+        let out = out?;
         let (r, dev_name) = (out.rendered, out.device);
         let d = PyDict::new(py);
         d.set_item("table_seconds", out.table_seconds)?;
@@ -316,10 +349,7 @@ fn attitudes(a: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<Rot>> {
     let v = a.as_array();
     let rots = match v.shape() {
         [_, 4] => {
-            let qs: Vec<[f64; 4]> = v
-                .outer_iter()
-                .map(|r| [r[0], r[1], r[2], r[3]])
-                .collect();
+            let qs: Vec<[f64; 4]> = v.outer_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
             rotations_from_quaternions(&qs)?
         }
         [_, 3, 3] => v

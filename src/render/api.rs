@@ -283,3 +283,8 @@ pub fn check_sensor(s: &SensorSetup) -> Result<()> {
     }
     Ok(())
 }
+
+/// A progress callback: called with `(attitudes done, attitudes in the batch)` as a render
+/// goes (after each GPU chunk, after each attitude on the CPU; from worker threads there);
+/// returning `false` stops the render, which then returns [`crate::Error::Cancelled`].
+pub type Progress<'a> = Option<&'a (dyn Fn(usize, usize) -> bool + Sync)>;

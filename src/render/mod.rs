@@ -106,7 +106,8 @@ pub mod tables;
 pub(crate) mod test_scenes;
 
 pub use api::{
-    check_samples, check_sensor, Layout, Outputs, Rendered, SensorSetup, MAX_IMAGE_SIDE,
+    check_samples, check_sensor, Layout, Outputs, Progress, Rendered, SensorSetup,
+    MAX_IMAGE_SIDE,
 };
 
 /// Speed of light in vacuum (m/s).

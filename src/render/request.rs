@@ -3,7 +3,7 @@
 //! ([`crate::render::gpu`]) or one of the f64 CPU renderers ([`crate::render::cpu`]).
 //! The Python binding only converts its arguments and calls [`render`].
 
-use super::api::{Outputs, Rendered, SensorSetup};
+use super::api::{Outputs, Progress, Rendered, SensorSetup};
 use super::cpu;
 use super::geometry::{Mesh, Rot};
 use super::gpu::{self, DeviceChoice};
@@ -41,7 +41,8 @@ impl Backend {
 /// first use and cached in `tables`; the reference uses neither). An empty batch is
 /// refused ([`gpu::check_batch`]), and the CPU backends refuse a render that would not fit
 /// ([`cpu::check_cpu_render`]). Returns the result, what rendered it and the tables' build
-/// time ([`RenderOutput`]).
+/// time ([`RenderOutput`]). `progress` is told how many attitudes are done as the render
+/// goes and may stop it ([`Progress`]).
 pub fn render(
     mesh: &Mesh,
     tables: &SceneTables,
@@ -50,29 +51,44 @@ pub fn render(
     rotations: &[Rot],
     outputs: Outputs,
     backend: Backend,
+    progress: Progress,
 ) -> Result<RenderOutput> {
     gpu::check_batch(rotations)?;
     let beta = sensor.bistatic_angle;
     let timed = std::time::Instant::now();
-    let seconds = |built: bool| if built { timed.elapsed().as_secs_f64() } else { 0.0 };
+    let seconds = |built: bool| {
+        if built {
+            timed.elapsed().as_secs_f64()
+        } else {
+            0.0
+        }
+    };
     let (rendered, device, table_seconds) = match backend {
         Backend::Reference => {
             cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
-            let r = cpu::render_reference(mesh, sensor, rotations, outputs, &tables.materials);
+            let r = cpu::render_reference(
+                mesh,
+                sensor,
+                rotations,
+                outputs,
+                &tables.materials,
+                progress,
+            )?;
             (r, "reference (f64 CPU, exact BRDFs)".to_string(), 0.0)
         }
         Backend::Cpu64 => {
             cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
             let (_, f64_tables, built) = tables.get_with_tables(beta, table_options)?;
             let t = seconds(built);
-            let r = cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables);
+            let r = cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables, progress)?;
             (r, "f64 twin (CPU, BRDF tables)".to_string(), t)
         }
         Backend::Gpu(choice) => {
             let (packed, built) = tables.get_with(beta, table_options)?;
             let t = seconds(built);
             let g = gpu::context(choice)?;
-            let r = gpu::render(&g, mesh, &packed, sensor, rotations, outputs)?;
+            let r =
+                gpu::render_with_progress(&g, mesh, &packed, sensor, rotations, outputs, progress)?;
             (r, g.info.name.clone(), t)
         }
     };
@@ -142,6 +158,7 @@ mod tests {
                 &[],
                 all,
                 backend,
+                None,
             );
             let e = r.err().expect("an empty batch is refused").to_string();
             assert!(e.contains("attitudes"), "{backend:?}: {e}");

@@ -4,7 +4,7 @@ into a :class:`~pprender.lidar.result.RenderResult`."""
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -127,6 +127,7 @@ def render(
     *,
     device: str = "auto",
     settings: Settings | None = None,
+    progress: Callable[[int, int], object] | None = None,
 ) -> RenderResult:
     """Render ``scene`` seen by ``sensor`` at every attitude, as one batch.
 
@@ -153,6 +154,11 @@ def render(
         How to compute it (quality, resolution, samples, tables, arithmetic): these replace
         the sensor's own (:attr:`Lidar.settings`), so one sensor can be rendered at several
         settings. Default: the sensor's.
+    progress : callable, optional
+        ``progress(done, total)``, called as attitudes are done (after each chunk on a
+        device, after each attitude on the CPU, then from worker threads), e.g. to update a
+        ``tqdm`` bar. An exception it raises stops the render and propagates; Ctrl-C
+        (KeyboardInterrupt) stops a device render between chunks too.
 
     Returns
     -------
@@ -202,6 +208,8 @@ def render(
             )
     if device not in ("auto", "cpu", "lavapipe", "gpu"):
         raise Error(f'invalid device = {device!r}: one of "auto", "cpu" (lavapipe), "gpu"')
+    if progress is not None and not callable(progress):
+        raise Error(f"invalid progress of type {type(progress).__name__}: a callable progress(done, total)")
     rot = _attitude_array(attitudes)
     if len(rot) == 0:
         raise Error("invalid attitudes: empty batch (N = 0)")
@@ -234,6 +242,7 @@ def render(
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
         analytic=st.coverage == "analytic",
+        progress=progress,
         **topts,
     )
     n = len(rot)

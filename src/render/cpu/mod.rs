@@ -39,7 +39,7 @@ pub use raster::{
 pub use shade::{shade_pixel, shade_point, Brdf, Framed, PixelSample, Tables};
 pub use shadow::{shadowed, TransmitterView};
 
-use super::api::{Layout, Outputs, Rendered, SensorSetup};
+use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
 use super::geometry::{Mesh, Rot};
 use crate::brdf::table::BrdfTable;
 use crate::optics::frames::{Frame, V3};
@@ -167,6 +167,20 @@ pub fn render_cpu(
     outputs: Outputs,
     brdf: &(impl Brdf + ?Sized),
 ) -> Rendered {
+    render_cpu_with_progress(mesh, sensor, rotations, outputs, brdf, None)
+        .expect("without a progress callback nothing cancels")
+}
+
+/// [`render_cpu`], reporting to `progress` after each attitude (from the worker threads) and
+/// stopping when it returns `false`: the attitudes not yet started are skipped.
+pub fn render_cpu_with_progress(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &(impl Brdf + ?Sized),
+    progress: Progress,
+) -> crate::Result<Rendered> {
     let lay = Layout::new(mesh, sensor);
     let w = lay.width;
     let ch = sensor.channels();
@@ -247,7 +261,7 @@ pub fn render_cpu(
     // (in groups of BLOCKS_AT_ONCE, each group added in order to the sums so far: the
     // same additions in the same order as all blocks at once, without holding every
     // block's profile)
-    let render_one = |rot: &Rot, in_parallel: bool| {
+    let render_one_attitude = |rot: &Rot, in_parallel: bool| {
         let prep = prepare(rot, in_parallel);
         let mut sums: Option<Accumulator> = None;
         for group in blocks.chunks(BLOCKS_AT_ONCE) {
@@ -262,6 +276,21 @@ pub fn render_cpu(
             sums = Some(Accumulator::concat(sums.into_iter().chain(accs)));
         }
         sums.expect("at least one row block").into_outputs()
+    };
+    let n_done = std::sync::atomic::AtomicUsize::new(0);
+    let cancelled = std::sync::atomic::AtomicBool::new(false);
+    let render_one = |rot: &Rot, in_parallel: bool| {
+        use std::sync::atomic::Ordering::Relaxed;
+        if cancelled.load(Relaxed) {
+            return Default::default();
+        }
+        let out = render_one_attitude(rot, in_parallel);
+        if let Some(report) = progress {
+            if !report(n_done.fetch_add(1, Relaxed) + 1, rotations.len()) {
+                cancelled.store(true, Relaxed);
+            }
+        }
+        out
     };
     // attitudes in parallel when there are enough of them and that many fit the memory
     // budget; otherwise at most as many at a time as fit, each one's visibility samples
@@ -282,9 +311,12 @@ pub fn render_cpu(
                 })
                 .collect()
         };
+    if cancelled.into_inner() {
+        return Err(crate::Error::Cancelled);
+    }
     let n = rotations.len();
     let cov: Vec<f32> = per.iter().flat_map(|p| p.4.iter().copied()).collect();
-    Rendered {
+    Ok(Rendered {
         n,
         height: w,
         width: w,
@@ -305,7 +337,7 @@ pub fn render_cpu(
         n_bins: nb,
         pixel_size: lay.pix,
         extent: lay.ext,
-    }
+    })
 }
 
 /// The exact f64 reference renderer: [`render_cpu`] with every material evaluated by the
@@ -319,9 +351,10 @@ pub fn render_reference(
     rotations: &[Rot],
     outputs: Outputs,
     materials: &[std::sync::Arc<crate::brdf::Material>],
-) -> Rendered {
+    progress: Progress,
+) -> crate::Result<Rendered> {
     let brdf = |m: usize, wi: V3, wo: V3| crate::brdf::eval(&materials[m], wi, wo, Frame::Sp);
-    render_supersampled(mesh, sensor, rotations, outputs, &brdf)
+    render_supersampled_with_progress(mesh, sensor, rotations, outputs, &brdf, progress)
 }
 
 /// The kernel's algorithm in f64 on the CPU with the GPU's BRDF tables (their f64
@@ -334,8 +367,9 @@ pub fn render_tables(
     rotations: &[Rot],
     outputs: Outputs,
     tables: &[BrdfTable],
-) -> Rendered {
-    render_supersampled(mesh, sensor, rotations, outputs, &Tables(tables))
+    progress: Progress,
+) -> crate::Result<Rendered> {
+    render_supersampled_with_progress(mesh, sensor, rotations, outputs, &Tables(tables), progress)
 }
 
 /// [`render_cpu`] at `sensor.supersampling` sub-pixels per pixel side, the images summed
@@ -347,7 +381,20 @@ pub fn render_supersampled(
     outputs: Outputs,
     brdf: &(impl Brdf + ?Sized),
 ) -> Rendered {
-    let mut r = render_cpu(mesh, sensor, rotations, outputs, brdf);
+    render_supersampled_with_progress(mesh, sensor, rotations, outputs, brdf, None)
+        .expect("without a progress callback nothing cancels")
+}
+
+/// [`render_supersampled`] with a progress callback ([`render_cpu_with_progress`]).
+pub fn render_supersampled_with_progress(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &(impl Brdf + ?Sized),
+    progress: Progress,
+) -> crate::Result<Rendered> {
+    let mut r = render_cpu_with_progress(mesh, sensor, rotations, outputs, brdf, progress)?;
     let ss = sensor.supersampling;
     if ss > 1 {
         let (w, res, n, ch) = (r.width, sensor.resolution, r.n, r.channels);
@@ -368,7 +415,7 @@ pub fn render_supersampled(
         r.width = res;
         r.pixel_size *= ss as f64;
     }
-    r
+    Ok(r)
 }
 
 #[cfg(test)]

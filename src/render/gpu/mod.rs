@@ -43,7 +43,7 @@ pub use pack::{
 pub use plan::{transmitter_map_width, KernelOutputs};
 pub use readback::host_profile;
 
-use super::api::{Layout, Outputs, Rendered, SensorSetup};
+use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
 use super::geometry::{Mesh, Rot};
 use crate::error::Result;
 use passes::{encode_chunk, ChunkBindings, SceneBuffers, ShadeKey};
@@ -72,6 +72,20 @@ pub fn render(
     rotations: &[Rot],
     outputs: Outputs,
 ) -> Result<Rendered> {
+    render_with_progress(gpu, mesh, tables, sensor, rotations, outputs, None)
+}
+
+/// [`render`], reporting to `progress` after each chunk of attitudes (and stopping when it
+/// returns `false`).
+pub fn render_with_progress(
+    gpu: &Gpu,
+    mesh: &Mesh,
+    tables: &GpuTables,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    progress: Progress,
+) -> Result<Rendered> {
     // an empty batch would make an empty chunk, and stepping by it panics
     check_batch(rotations)?;
     let lay = Layout::new(mesh, sensor);
@@ -92,7 +106,7 @@ pub fn render(
     let mut r = device::error_scoped(&gpu.device, || {
         render_chunks(
             gpu, mesh, &geometry, tables, &params, fix_scale, &plan, &lay, sensor, rotations,
-            outputs,
+            outputs, progress,
         )
     })?;
     r.n = rotations.len();
@@ -115,6 +129,7 @@ fn render_chunks(
     sensor: &SensorSetup,
     rotations: &[Rot],
     outputs: Outputs,
+    progress: Progress,
 ) -> Result<Rendered> {
     let dev = &gpu.device;
     let n = rotations.len();
@@ -153,6 +168,11 @@ fn render_chunks(
         results.copy_for_readback(&mut enc, m);
         gpu.queue.submit([enc.finish()]);
         results.read_chunk(dev, start, m, &mut host)?;
+        if let Some(report) = progress {
+            if !report(start + m, n) {
+                return Err(crate::Error::Cancelled);
+            }
+        }
     }
     Ok(host.into_rendered(plan.channels, lay, sensor))
 }
