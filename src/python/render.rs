@@ -283,16 +283,13 @@ impl PyRenderScene {
             })
         };
         let out = py.detach(|| {
-            request::render(
-                &mesh,
-                &self.tables,
-                &opts,
-                &sensor,
-                &rots,
+            let request = request::Request {
+                sensor: &sensor,
                 outputs,
                 backend,
-                Some(&report),
-            )
+                table_options: &opts,
+            };
+            request::render(&mesh, &self.tables, &request, &rots, Some(&report))
         });
         if let Some(e) = raised.into_inner().expect("progress error") {
             return Err(e);

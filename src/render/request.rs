@@ -36,7 +36,7 @@ impl Backend {
     }
 }
 
-/// Render a batch of attitudes (`rotations`) of `mesh` on `backend`, with the scene's
+/// Render a batch of attitudes (`rotations`) of `mesh` as `request` says, with the scene's
 /// materials and their tables for the sensor's bistatic angle and `table_options` (built on
 /// first use and cached in `tables`; the reference uses neither). An empty batch is
 /// refused ([`gpu::check_batch`]), and the CPU backends refuse a render that would not fit
@@ -46,13 +46,16 @@ impl Backend {
 pub fn render(
     mesh: &Mesh,
     tables: &SceneTables,
-    table_options: &BrdfTableOptions,
-    sensor: &SensorSetup,
+    request: &Request,
     rotations: &[Rot],
-    outputs: Outputs,
-    backend: Backend,
     progress: Progress,
 ) -> Result<RenderOutput> {
+    let Request {
+        sensor,
+        outputs,
+        backend,
+        table_options,
+    } = *request;
     gpu::check_batch(rotations)?;
     let beta = sensor.bistatic_angle;
     let timed = std::time::Instant::now();
@@ -97,6 +100,16 @@ pub fn render(
         device,
         table_seconds,
     })
+}
+
+/// What to render, and on what: the sensor set-up, the outputs, the backend and the BRDF
+/// table grid (unused by the reference).
+#[derive(Clone, Copy)]
+pub struct Request<'a> {
+    pub sensor: &'a SensorSetup,
+    pub outputs: Outputs,
+    pub backend: Backend,
+    pub table_options: &'a BrdfTableOptions,
 }
 
 /// What [`render`] returns.
@@ -150,16 +163,13 @@ mod tests {
             Backend::Cpu64,
             Backend::Reference,
         ] {
-            let r = render(
-                &mesh,
-                &tables,
-                &BrdfTableOptions::default(),
-                &lambert_sensor(8),
-                &[],
-                all,
+            let request = Request {
+                sensor: &lambert_sensor(8),
+                outputs: all,
                 backend,
-                None,
-            );
+                table_options: &BrdfTableOptions::default(),
+            };
+            let r = render(&mesh, &tables, &request, &[], None);
             let e = r.err().expect("an empty batch is refused").to_string();
             assert!(e.contains("attitudes"), "{backend:?}: {e}");
         }
