@@ -107,3 +107,26 @@ def test_progress_reports_and_an_exception_stops_the_render(kw) -> None:
     np.testing.assert_array_equal(again.profile, full.profile)
     with pytest.raises(pprender.Error, match="progress"):
         pprender.render(SCENE, sensor, q, progress=3)
+
+
+@pytest.mark.parametrize("kw, stages", [
+    (dict(), ["tables", "device context", "plan", "pipeline and buffers", "encode and submit", "device",
+              "readback", "to NumPy"]),
+    (dict(arithmetic="f64"), ["tables", "render", "to NumPy"]),
+    (dict(quality="reference"), ["render", "to NumPy"]),
+])
+def test_stage_seconds_name_each_backends_stages_in_order(kw, stages) -> None:
+    """``RenderResult.stage_seconds``: the benchmarks' diagnostic. Each backend's stages in
+    the order they run, none negative, their sum within the call's wall-clock time (which
+    adds only the Python-side checks and bookkeeping)."""
+    import time
+
+    scene = pprender.Scene(models.sphere(0.3, 2), pprender.Material("beckmann", alpha=0.35, eta=1.6))
+    t = time.perf_counter()
+    r = pprender.render(scene, pprender.Lidar(resolution=12, **kw), Q, outputs=("profile", "mueller"))
+    wall = time.perf_counter() - t
+    assert list(r.stage_seconds) == stages
+    assert all(v >= 0.0 for v in r.stage_seconds.values())
+    assert sum(r.stage_seconds.values()) <= wall
+    if "tables" in stages:  # a new material: its tables are built in this call
+        assert r.stage_seconds["tables"] == r.table_seconds > 0

@@ -190,8 +190,10 @@ impl PyRenderScene {
     }
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope, or (n, 4) unit quaternions
-    /// `(w, x, y, z)`. Returns a dict of arrays and `table_seconds`, the time spent building
-    /// the materials' tables in this call (0 when cached). `progress(done, total)` is called
+    /// `(w, x, y, z)`. Returns a dict of arrays, `table_seconds`, the time spent building
+    /// the materials' tables in this call (0 when cached), and `stage_seconds`, the
+    /// wall-clock seconds of the render's stages ([`crate::render::Rendered::stage_seconds`]
+    /// and the conversion to NumPy). `progress(done, total)` is called
     /// as attitudes are done; an exception it raises (or Ctrl-C) stops the render.
     /// `device = "reference"`: the f64 CPU reference (`cpu::render_reference`, exact
     /// BRDFs, no tables; the table keywords are then unused). `device = "twin"`: the
@@ -296,6 +298,8 @@ impl PyRenderScene {
         }
         let out = out?;
         let (r, dev_name) = (out.rendered, out.device);
+        let to_numpy = std::time::Instant::now();
+        let mut stages = r.stage_seconds.clone();
         let d = PyDict::new(py);
         d.set_item("table_seconds", out.table_seconds)?;
         let (n, h, w, c) = (r.n, r.height, r.width, r.channels);
@@ -324,6 +328,12 @@ impl PyRenderScene {
         d.set_item("pixel_size", r.pixel_size)?;
         d.set_item("extent", r.extent)?;
         d.set_item("device", dev_name)?;
+        stages.push(("to NumPy", to_numpy.elapsed().as_secs_f64()));
+        let st = PyDict::new(py);
+        for (name, seconds) in stages {
+            st.set_item(name, seconds)?;
+        }
+        d.set_item("stage_seconds", st)?;
         Ok(d)
     }
 }

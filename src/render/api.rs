@@ -123,6 +123,10 @@ pub struct Rendered {
     pub n_bins: usize,
     pub pixel_size: f64,
     pub extent: f64,
+    /// Wall-clock seconds of this render's stages, in order (a diagnostic: on the GPU
+    /// `plan`, `pipeline and buffers`, `encode and submit`, `device`, `readback`; one
+    /// `render` stage on the CPU backends).
+    pub stage_seconds: Vec<(&'static str, f64)>,
 }
 
 /// Geometry of the image and profile for a mesh and sensor.

@@ -69,7 +69,8 @@ pub fn render(
     let (rendered, device, table_seconds) = match backend {
         Backend::Reference => {
             cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
-            let r = cpu::render_reference(
+            let t = std::time::Instant::now();
+            let mut r = cpu::render_reference(
                 mesh,
                 sensor,
                 rotations,
@@ -77,21 +78,32 @@ pub fn render(
                 &tables.materials,
                 progress,
             )?;
+            r.stage_seconds = vec![("render", t.elapsed().as_secs_f64())];
             (r, "reference (f64 CPU, exact BRDFs)".to_string(), 0.0)
         }
         Backend::Cpu64 => {
             cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
             let (_, f64_tables, built) = tables.get_with_tables(beta, table_options)?;
             let t = seconds(built);
-            let r = cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables, progress)?;
+            let started = std::time::Instant::now();
+            let mut r =
+                cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables, progress)?;
+            r.stage_seconds = vec![
+                ("tables", t),
+                ("render", started.elapsed().as_secs_f64()),
+            ];
             (r, "f64 twin (CPU, BRDF tables)".to_string(), t)
         }
         Backend::Gpu(choice) => {
             let (packed, built) = tables.get_with(beta, table_options)?;
             let t = seconds(built);
+            let started = std::time::Instant::now();
             let g = gpu::context(choice)?;
-            let r =
+            let context = started.elapsed().as_secs_f64();
+            let mut r =
                 gpu::render_with_progress(&g, mesh, &packed, sensor, rotations, outputs, progress)?;
+            r.stage_seconds
+                .splice(0..0, [("tables", t), ("device context", context)]);
             (r, g.info.name.clone(), t)
         }
     };

@@ -255,6 +255,7 @@ def render(
         extent=float(d["extent"]),
         device=str(d["device"]),
         table_seconds=float(d["table_seconds"]),
+        stage_seconds={str(k): float(v) for k, v in d["stage_seconds"].items()},
         wavelength=float(sensor.wavelength),
     )
     if "profile" in d:

@@ -45,6 +45,13 @@ class RenderResult:
     table_seconds : float
         Time spent preparing the BRDF tables for this render (s; 0 for
         ``quality="reference"``).
+    stage_seconds : dict
+        Wall-clock seconds of this render's stages, in order, a diagnostic for benchmarks:
+        ``tables``, ``device context`` (device creation on first use), ``plan``,
+        ``pipeline and buffers`` (shader compilation on first use), ``encode and submit``,
+        ``device`` (waiting for the GPU), ``readback`` (mapping and decoding the results)
+        on a device; ``tables`` and ``render`` for ``arithmetic="f64"``, ``render`` for
+        ``quality="reference"``; then ``to NumPy``. Empty for a result assembled by hand.
     extra : dict
         Free-form additions; empty as :func:`pprender.render` returns it.
     wavelength : float or None
@@ -70,6 +77,7 @@ class RenderResult:
     range: np.ndarray | None = None
     coverage: np.ndarray | None = None
     table_seconds: float = 0.0
+    stage_seconds: dict[str, float] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
     #: The sensor's wavelength (m) the render was made at (the materials' wavelength);
     #: None for a result assembled by hand.

@@ -337,6 +337,7 @@ pub fn render_cpu_with_progress(
         n_bins: nb,
         pixel_size: lay.pix,
         extent: lay.ext,
+        stage_seconds: Vec::new(),
     })
 }
 
@@ -407,7 +408,7 @@ pub fn render_supersampled_with_progress(
             let mut out = vec![0.0f32; n * res * res];
             let mut cov = vec![0.0f32; n * res * res];
             let c0 = r.coverage.take().expect("coverage with the range");
-            super::downsample::downsample_range(rng, &c0, n, w, ss, &mut out, &mut cov);
+            super::downsample::downsample_range(rng, &c0, 1, 0, n, w, ss, &mut out, &mut cov);
             *rng = out;
             r.coverage = Some(cov);
         }

@@ -48,6 +48,7 @@ use super::geometry::{Mesh, Rot};
 use crate::error::Result;
 use passes::{encode_chunk, ChunkBindings, SceneBuffers, ShadeKey};
 use plan::Plan;
+use std::time::Instant;
 use readback::{HostOutputs, ResultBuffers};
 use targets::Targets;
 
@@ -88,6 +89,7 @@ pub fn render_with_progress(
 ) -> Result<Rendered> {
     // an empty batch would make an empty chunk, and stepping by it panics
     check_batch(rotations)?;
+    let t0 = Instant::now();
     let lay = Layout::new(mesh, sensor);
     lay.check_bins(sensor)?;
     plan::check_image(gpu, &lay, sensor, mesh.faces.len())?;
@@ -103,6 +105,7 @@ pub fn render_with_progress(
     )?;
     let params = ShadeParams::new(mesh, &lay, sensor, plan.fix_scale, plan.tx_width);
     let fix_scale = params.fix_scale as f64; // what the kernel uses
+    let planned = t0.elapsed().as_secs_f64();
     let mut r = device::error_scoped(&gpu.device, || {
         render_chunks(
             gpu, mesh, &geometry, tables, &params, fix_scale, &plan, &lay, sensor, rotations,
@@ -110,12 +113,15 @@ pub fn render_with_progress(
         )
     })?;
     r.n = rotations.len();
+    r.stage_seconds.insert(0, ("plan", planned));
     Ok(r)
 }
 
 /// The batch in chunks of [`Plan::chunk`] attitudes: the scene uploaded and the chunk's
 /// buffers and targets made once, then per chunk its bind groups, its passes encoded
-/// between clearing the sums and copying the results out, submitted, and read back.
+/// between clearing the sums and copying the results out, submitted, and read back
+/// (the stages timed in [`Rendered::stage_seconds`]; waiting for the device is timed
+/// apart from reading the results back).
 #[allow(clippy::too_many_arguments)]
 fn render_chunks(
     gpu: &Gpu,
@@ -132,6 +138,7 @@ fn render_chunks(
     progress: Progress,
 ) -> Result<Rendered> {
     let dev = &gpu.device;
+    let t0 = Instant::now();
     let n = rotations.len();
     let key = ShadeKey::new(plan, sensor, tables);
     let pipeline = gpu.pipelines.shade_pipeline(dev, key)?;
@@ -148,9 +155,12 @@ fn render_chunks(
     );
     let transmitter = key.shadows.then_some(sensor.bistatic_angle);
     let mut host = HostOutputs::new(outputs, n, sensor.resolution, plan.channels, lay.n_bins);
+    let setup = t0.elapsed().as_secs_f64();
+    let (mut encoding, mut waiting, mut reading) = (0.0, 0.0, 0.0);
     for start in (0..n).step_by(c) {
         let m = (n - start).min(c);
         let rots = &rotations[start..start + m];
+        let t = Instant::now();
         let bindings = ChunkBindings::new(gpu, &scene, &targets, &results, rots, transmitter);
         let mut enc = dev.create_command_encoder(&Default::default());
         results.clear(&mut enc);
@@ -167,12 +177,26 @@ fn render_chunks(
         );
         results.copy_for_readback(&mut enc, m);
         gpu.queue.submit([enc.finish()]);
+        encoding += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        dev.poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| device::device_error(format!("device poll failed: {e}")))?;
+        waiting += t.elapsed().as_secs_f64();
+        let t = Instant::now();
         results.read_chunk(dev, start, m, &mut host)?;
+        reading += t.elapsed().as_secs_f64();
         if let Some(report) = progress {
             if !report(start + m, n) {
                 return Err(crate::Error::Cancelled);
             }
         }
     }
-    Ok(host.into_rendered(plan.channels, lay, sensor))
+    let mut r = host.into_rendered(plan.channels, lay, sensor);
+    r.stage_seconds = vec![
+        ("pipeline and buffers", setup),
+        ("encode and submit", encoding),
+        ("device", waiting),
+        ("readback", reading),
+    ];
+    Ok(r)
 }

@@ -59,6 +59,7 @@ impl HostOutputs {
             n_bins: lay.n_bins,
             pixel_size: lay.pix * sensor.supersampling as f64,
             extent: lay.ext,
+            stage_seconds: Vec::new(),
         }
     }
 }
@@ -234,20 +235,32 @@ impl<'a> ResultBuffers<'a> {
             let p = fixed(&bytes);
             out[start * nb * channels..(start + m) * nb * channels].copy_from_slice(&p);
         }
-        let raw_img = self
-            .image_read
-            .as_ref()
-            .map(|b| read(b, img_bytes))
-            .transpose()?;
-        let raw_rng = self
-            .range_read
-            .as_ref()
-            .map(|b| read(b, rng_bytes))
-            .transpose()?;
+        // the image and range are decoded straight from the mapped buffers (no host copy of
+        // them): both are mapped at once, as the sampled pulse needs both
+        let img_slice = self.image_read.as_ref().map(|b| b.slice(0..img_bytes));
+        let rng_slice = self.range_read.as_ref().map(|b| b.slice(0..rng_bytes));
+        for sl in img_slice.iter().chain(rng_slice.iter()) {
+            sl.map_async(wgpu::MapMode::Read, |_| {});
+        }
+        if img_slice.is_some() || rng_slice.is_some() {
+            dev.poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| device_error(format!("device poll failed: {e}")))?;
+        }
+        let view = |sl: &Option<wgpu::BufferSlice>| {
+            sl.as_ref()
+                .map(|sl| {
+                    sl.get_mapped_range()
+                        .map_err(|e| device_error(format!("cannot map a result buffer: {e}")))
+                })
+                .transpose()
+        };
+        let (img_view, rng_view) = (view(&img_slice)?, view(&rng_slice)?);
+        let img: Option<&[f32]> = img_view.as_deref().map(bytemuck::cast_slice);
+        let rng: Option<&[f32]> = rng_view.as_deref().map(bytemuck::cast_slice);
         if let (Some(pulse), Some(out)) = (&sensor.pulse, host.profile.as_mut()) {
             // sampled pulse: the profile from the per-pixel footprints, in f64 on the host
-            let img: &[f32] = bytemuck::cast_slice(raw_img.as_deref().expect("kernel image"));
-            let foot: &[f32] = bytemuck::cast_slice(raw_rng.as_deref().expect("footprints"));
+            let img = img.expect("kernel image");
+            let foot = rng.expect("footprints");
             let cap = 2f64.powi(61) / (fix_scale * px as f64);
             let prof = &mut out[start * nb * channels..(start + m) * nb * channels];
             prof.par_chunks_mut(nb * channels)
@@ -265,8 +278,7 @@ impl<'a> ResultBuffers<'a> {
                     )
                 });
         }
-        if let (Some(raw), Some(out)) = (&raw_img, host.image.as_mut()) {
-            let v: &[f32] = bytemuck::cast_slice(raw);
+        if let (Some(v), Some(out)) = (img, host.image.as_mut()) {
             downsample_sum(
                 v,
                 m,
@@ -276,25 +288,24 @@ impl<'a> ResultBuffers<'a> {
                 &mut out[start * res * res * channels..],
             );
         }
-        if let (Some(raw), Some(out), Some(cov)) =
-            (&raw_rng, host.range.as_mut(), host.coverage.as_mut())
+        if let (Some(v), Some(out), Some(cov)) = (rng, host.range.as_mut(), host.coverage.as_mut())
         {
-            let v: &[f32] = bytemuck::cast_slice(raw);
             // (range, ..., covered fraction) per pixel
-            let r0: Vec<f32> = v.iter().step_by(rng_stride).copied().collect();
-            let c0: Vec<f32> = v
-                .chunks_exact(rng_stride)
-                .map(|p| p[rng_stride - 1])
-                .collect();
             downsample_range(
-                &r0,
-                &c0,
+                v,
+                v,
+                rng_stride,
+                rng_stride - 1,
                 m,
                 w,
                 ss,
                 &mut out[start * res * res..],
                 &mut cov[start * res * res..],
             );
+        }
+        drop((img_view, rng_view));
+        for b in self.image_read.iter().chain(self.range_read.iter()) {
+            b.unmap();
         }
         Ok(())
     }
