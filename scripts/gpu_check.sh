@@ -9,15 +9,15 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 ls .whl/pprender-*.whl >/dev/null 2>&1 || { echo "gpu_check: no .whl/pprender-*.whl (run scripts/gpu_bundle.sh)" >&2; exit 2; }
-if ! ldconfig -p | grep -q 'libvulkan\.so\.1'; then
-  ls .gl/*.deb >/dev/null 2>&1 || { echo "gpu_check: no Vulkan loader and no .gl/*.deb (scripts/gpu_bundle.sh)" >&2; exit 2; }
+# the Vulkan loader, and libglvnd, which NVIDIA's Vulkan driver (libGLX_nvidia) needs
+if ! ldconfig -p | grep -q 'libvulkan\.so\.1' || ! ldconfig -p | grep -q 'libGLdispatch\.so\.0'; then
+  ls .gl/*.deb >/dev/null 2>&1 || { echo "gpu_check: no Vulkan loader or libglvnd and no .gl/*.deb (scripts/gpu_bundle.sh)" >&2; exit 2; }
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
 fi
-# NVIDIA's Vulkan driver manifest where the driver is mounted outside the loader's search path
+# NVIDIA's Vulkan driver manifest where the driver is mounted outside the system's paths
 nvidia_icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
-if [ -z "${VK_DRIVER_FILES:-}${VK_ICD_FILENAMES:-}" ] && [ -f "$nvidia_icd" ] \
-   && ! ls /usr/share/vulkan/icd.d/nvidia* /etc/vulkan/icd.d/nvidia* >/dev/null 2>&1; then
+if [ -z "${VK_DRIVER_FILES:-}${VK_ICD_FILENAMES:-}" ] && [ -f "$nvidia_icd" ]; then
   export VK_DRIVER_FILES=$nvidia_icd
 fi
 site=$(mktemp -d)

@@ -24,11 +24,15 @@ def _load():
 def test_gpu_check_on_lavapipe(tmp_path) -> None:
     check = _load()
     out = tmp_path / "gpu.md"
-    assert check.main(["--device", "cpu", "--budget", "1", "--write", str(out)]) == 0
+    assert check.main(["--device", "cpu", "--budget", "1", "--quick", "--write", str(out)]) == 0
     text = out.read_text()
     assert "llvmpipe" in text
     assert text.count("| pass |") == 3 and "FAIL" not in text
     assert "realizations/s" in text
+    assert "## Where the time goes: Mueller outputs, batch 4" in text
+    assert "| profile + mueller + range |" in text
+    assert "## What the device time scales with: profile only (Stokes, H), batch 4" in text
+    assert "| icosphere, 20480 triangles, 128x128 |" in text
 
 
 def test_gpu_check_grades_a_wrong_kernel() -> None:
