@@ -426,6 +426,7 @@ fn device_info<'py>(py: Python<'py>, device: &str) -> PyResult<Bound<'py, PyDict
     )?;
     d.set_item("max_texture_array_layers", i.max_texture_array_layers)?;
     d.set_item("max_texture_dimension_2d", i.max_texture_dimension_2d)?;
+    d.set_item("raster_views", i.raster_views)?;
     Ok(d)
 }
 

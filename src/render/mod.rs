@@ -120,21 +120,37 @@ mod tests {
     use super::*;
 
     fn validate(name: &str, src: &str) -> naga::Module {
+        validate_with(name, src, naga::valid::Capabilities::empty())
+    }
+
+    fn validate_with(name: &str, src: &str, caps: naga::valid::Capabilities) -> naga::Module {
         let module = naga::front::wgsl::parse_str(src)
             .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
-        naga::valid::Validator::new(
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps)
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        module
+    }
+
+    /// The multiview visibility stage validates with the MULTIVIEW capability alone, and
+    /// not without it (it is created only on devices that have the feature).
+    #[test]
+    fn multiview_visibility_needs_the_multiview_capability() {
+        let src = shaders::visibility_views_module();
+        validate_with("visibility_views", &src, naga::valid::Capabilities::MULTIVIEW);
+        let module = naga::front::wgsl::parse_str(&src).unwrap();
+        assert!(naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::empty(),
+            naga::valid::Capabilities::empty()
         )
         .validate(&module)
-        .unwrap_or_else(|e| panic!("{name}: {e:?}"));
-        module
+        .is_err());
     }
 
     /// Every shader parses and validates with naga (no optional capabilities needed).
     #[test]
     fn shaders_validate_with_naga() {
-        validate("visibility.wgsl", shaders::VISIBILITY);
+        validate("visibility (raster + visibility)", &shaders::visibility_module());
         validate("pulse.wgsl", shaders::PULSE);
         validate("gather.wgsl", shaders::GATHER);
         let m = validate("shade (pulse + shade)", &shaders::shade_module());

@@ -88,10 +88,7 @@ pub fn render(
             let started = std::time::Instant::now();
             let mut r =
                 cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables, progress)?;
-            r.stage_seconds = vec![
-                ("tables", t),
-                ("render", started.elapsed().as_secs_f64()),
-            ];
+            r.stage_seconds = vec![("tables", t), ("render", started.elapsed().as_secs_f64())];
             (r, "f64 twin (CPU, BRDF tables)".to_string(), t)
         }
         Backend::Gpu(choice) => {

@@ -10,6 +10,8 @@
 //! users. Shared files may include others.
 
 pub const VISIBILITY: &str = include_str!("../../shaders/visibility.wgsl");
+/// The multiview visibility pass's vertex stage (needs the MULTIVIEW capability).
+pub const VISIBILITY_VIEWS: &str = include_str!("../../shaders/visibility_views.wgsl");
 /// The shade kernel as written (with its include lines; [`shade_module`] expands them).
 pub const SHADE: &str = include_str!("../../shaders/shade.wgsl");
 /// The pulse functions (plain functions, valid on their own), included into the shade
@@ -24,6 +26,10 @@ pub const SHARED: &[(&str, &str)] = &[
         include_str!("../../shaders/shared/constants.wgsl"),
     ),
     ("shared/pulse.wgsl", PULSE),
+    (
+        "shared/raster.wgsl",
+        include_str!("../../shaders/shared/raster.wgsl"),
+    ),
     (
         "shared/table.wgsl",
         include_str!("../../shaders/shared/table.wgsl"),
@@ -92,6 +98,16 @@ fn expand_into(
     Ok(())
 }
 
+/// The complete visibility module (one layer per pass).
+pub fn visibility_module() -> String {
+    expand("visibility.wgsl", VISIBILITY).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The complete multiview visibility module (several layers per pass).
+pub fn visibility_views_module() -> String {
+    expand("visibility_views.wgsl", VISIBILITY_VIEWS).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// The complete shade module (the kernel with its shared files).
 pub fn shade_module() -> String {
     expand("shade.wgsl", SHADE).unwrap_or_else(|e| panic!("{e}"))
@@ -108,6 +124,7 @@ mod tests {
         let mut used = vec![];
         for (name, src) in [
             ("visibility.wgsl", VISIBILITY),
+            ("visibility_views.wgsl", VISIBILITY_VIEWS),
             ("shade.wgsl", SHADE),
             ("gather.wgsl", GATHER),
         ] {
@@ -144,7 +161,8 @@ mod tests {
         let e = expand("k", "//#include shared/complex.wgsl").unwrap_err();
         assert!(e.contains("malformed"), "{e}");
         let ok = expand("k", "x\n  //#include \"shared/complex.wgsl\"\ny").unwrap();
-        assert_eq!(ok, format!("x\n{}y\n", SHARED[3].1));
+        let complex = SHARED.iter().find(|(p, _)| *p == "shared/complex.wgsl").unwrap().1;
+        assert_eq!(ok, format!("x\n{complex}y\n"));
     }
 
     /// The module-scope `const NAME[: T] = value;` declarations of `src`: name and value

@@ -30,7 +30,9 @@ def device_info(device: str = "auto") -> dict[str, Any]:
     dict
         The adapter's ``name``, ``backend``, ``device_type``, ``driver``, ``driver_info`` and
         the limits used (``max_storage_buffer_binding_size``, ``max_texture_array_layers``,
-        ``max_texture_dimension_2d``).
+        ``max_texture_dimension_2d``), and ``raster_views``: the attitudes (or visibility
+        samples) one raster pass draws (the device's multiview view count, at most 32; 1
+        without multiview; the environment variable ``PPRENDER_RASTER_VIEWS`` caps it).
 
     Raises
     ------

@@ -45,6 +45,9 @@ pub struct DeviceInfo {
     pub max_storage_buffer_binding_size: u64,
     pub max_texture_array_layers: u32,
     pub max_texture_dimension_2d: u32,
+    /// Array layers (attitudes or visibility samples) one visibility pass rasterizes: the
+    /// device's multiview view count (at most 32), 1 without multiview ([`raster_views`]).
+    pub raster_views: u32,
 }
 /// One device with its pipelines.
 pub struct Gpu {
@@ -116,9 +119,15 @@ impl Gpu {
         };
         let ainfo = adapter.get_info();
         let limits = adapter.limits();
+        let views = raster_views(&adapter);
+        let features = if views > 1 {
+            wgpu::Features::MULTIVIEW
+        } else {
+            wgpu::Features::empty()
+        };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("pprender"),
-            required_features: wgpu::Features::empty(),
+            required_features: features,
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -139,8 +148,14 @@ impl Gpu {
             max_storage_buffer_binding_size: limits.max_storage_buffer_binding_size,
             max_texture_array_layers: limits.max_texture_array_layers,
             max_texture_dimension_2d: limits.max_texture_dimension_2d,
+            raster_views: views,
         };
-        let pipelines = Pipelines::new(&device)?;
+        let pipelines = Pipelines::new(&device, views)?;
+        // what the device accepted (one layer per pass where it refused the multiview pipelines)
+        let info = DeviceInfo {
+            raster_views: pipelines.views,
+            ..info
+        };
         Ok(Gpu {
             device,
             queue,
@@ -149,6 +164,32 @@ impl Gpu {
             pipelines,
         })
     }
+}
+
+/// The environment variable that caps the layers per visibility pass (a diagnostic: `1`
+/// draws one layer per pass, as devices without multiview do).
+pub const RASTER_VIEWS_ENV: &str = "PPRENDER_RASTER_VIEWS";
+
+/// Layers per visibility pass on `adapter`: its multiview view count, at most 31 (wgpu
+/// caps the count at 32, and wgpu 30 asks for SELECTIVE_MULTIVIEW for a mask of all 32
+/// views: its mask arithmetic overflows) and at most [`RASTER_VIEWS_ENV`] when that is set
+/// to a positive integer; 1 without the MULTIVIEW feature. A pass per layer costs the device tens of microseconds whatever
+/// the layer's size (docs/gpu-benchmark.md), which multiview shares among the views.
+fn raster_views(adapter: &wgpu::Adapter) -> u32 {
+    if !adapter.features().contains(wgpu::Features::MULTIVIEW) {
+        return 1;
+    }
+    let cap = std::env::var(RASTER_VIEWS_ENV)
+        .ok()
+        .and_then(|v| v.trim().parse::<u32>().ok())
+        .filter(|&v| v >= 1)
+        .unwrap_or(32);
+    adapter
+        .limits()
+        .max_multiview_view_count
+        .min(31)
+        .min(cap)
+        .max(1)
 }
 
 /// Run `f` inside validation and out-of-memory error scopes on `dev`: an error either

@@ -1,8 +1,10 @@
 //! The wgpu side of the renderer: adapter choice, pipelines, chunked batch rendering.
 //!
-//! Per chunk of attitudes: one render pass per attitude and visibility sample rasterizes
-//! triangle indices into a layer of an R32Uint texture array (`shaders/visibility.wgsl`;
-//! with `K >= 4` samples, one 4x multisampled render pass per attitude into fixed tiles,
+//! Per chunk of attitudes: render passes rasterize triangle indices into one layer of an
+//! R32Uint texture array per attitude and visibility sample, a pass drawing one layer
+//! (`shaders/visibility.wgsl`) or, on devices with multiview, up to 31 consecutive layers
+//! (`shaders/visibility_views.wgsl`, the same arithmetic per layer; `Gpu`'s
+//! `raster_views`); with `K >= 4` samples, one 4x multisampled render pass per attitude into fixed tiles,
 //! gathered by `shaders/gather.wgsl` into a buffer: `targets::MsaaTiles`), then one compute
 //! dispatch (`shaders/shade.wgsl`, specialized by override constants to the requested
 //! outputs) shades every pixel and accumulates the profile and total in 64-bit fixed point.

@@ -23,6 +23,11 @@ use wgpu::util::DeviceExt;
 pub(super) struct Pipelines {
     vis_layout: wgpu::BindGroupLayout,
     vis_pipeline: [wgpu::RenderPipeline; 2],
+    /// The same drawing [`Pipelines::views`] layers per pass by multiview
+    /// (`visibility_views.wgsl`), where the device has it.
+    vis_pipeline_views: Option<[wgpu::RenderPipeline; 2]>,
+    /// Layers per visibility pass ([`super::device::DeviceInfo::raster_views`]).
+    pub(super) views: u32,
     /// The same at [`MSAA`] samples per texel, ids as `f32` (`fs_float`), into the tiles
     /// of `K >= 4` ([`super::targets::MsaaTiles`]), and the kernel that gathers them
     /// (`gather.wgsl`).
@@ -87,7 +92,7 @@ impl ShadeKey {
 impl Pipelines {
     /// Compile the visibility, gather and shade pipelines on `device` (the shade kernel's
     /// specializations on demand, [`Pipelines::shade_pipeline`]).
-    pub(super) fn new(device: &wgpu::Device) -> Result<Self> {
+    pub(super) fn new(device: &wgpu::Device, views: u32) -> Result<Self> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let storage =
             |binding: u32, read_only: bool, vis: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
@@ -131,8 +136,9 @@ impl Pipelines {
         });
         let vis_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("visibility.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::VISIBILITY.into()),
+            source: wgpu::ShaderSource::Wgsl(shaders::visibility_module().into()),
         });
+
         let vis_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("visibility"),
             bind_group_layouts: &[Some(&vis_layout)],
@@ -140,54 +146,75 @@ impl Pipelines {
         });
         // [no culling, back faces culled (closed, outward-wound meshes: Mesh::closed)];
         // the view maps the body's outward normals facing the viewer to counter-clockwise
-        let vis_pipelines = |count: u32, fs: &str, format| {
-            [None, Some(wgpu::Face::Back)].map(|cull_mode| {
-                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some("visibility"),
-                    layout: Some(&vis_pl),
-                    vertex: wgpu::VertexState {
-                        module: &vis_module,
-                        entry_point: Some("vs_main"),
-                        compilation_options: Default::default(),
-                        buffers: &[],
-                    },
-                    primitive: wgpu::PrimitiveState {
-                        topology: wgpu::PrimitiveTopology::TriangleList,
-                        cull_mode,
-                        front_face: wgpu::FrontFace::Ccw,
-                        ..Default::default()
-                    },
-                    depth_stencil: Some(wgpu::DepthStencilState {
-                        format: wgpu::TextureFormat::Depth32Float,
-                        depth_write_enabled: Some(true),
-                        depth_compare: Some(wgpu::CompareFunction::Less),
-                        stencil: Default::default(),
-                        bias: Default::default(),
-                    }),
-                    multisample: wgpu::MultisampleState {
-                        count,
-                        ..Default::default()
-                    },
-                    fragment: Some(wgpu::FragmentState {
-                        module: &vis_module,
-                        entry_point: Some(fs),
-                        compilation_options: Default::default(),
-                        targets: &[Some(wgpu::ColorTargetState {
-                            format,
-                            blend: None,
-                            write_mask: wgpu::ColorWrites::ALL,
-                        })],
-                    }),
-                    multiview_mask: None,
-                    cache: None,
+        let vis_pipelines =
+            |count: u32, fs: &str, format, vertex: (&wgpu::ShaderModule, &str), mask| {
+                [None, Some(wgpu::Face::Back)].map(|cull_mode| {
+                    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                        label: Some("visibility"),
+                        layout: Some(&vis_pl),
+                        vertex: wgpu::VertexState {
+                            module: vertex.0,
+                            entry_point: Some(vertex.1),
+                            compilation_options: Default::default(),
+                            buffers: &[],
+                        },
+                        primitive: wgpu::PrimitiveState {
+                            topology: wgpu::PrimitiveTopology::TriangleList,
+                            cull_mode,
+                            front_face: wgpu::FrontFace::Ccw,
+                            ..Default::default()
+                        },
+                        depth_stencil: Some(wgpu::DepthStencilState {
+                            format: wgpu::TextureFormat::Depth32Float,
+                            depth_write_enabled: Some(true),
+                            depth_compare: Some(wgpu::CompareFunction::Less),
+                            stencil: Default::default(),
+                            bias: Default::default(),
+                        }),
+                        multisample: wgpu::MultisampleState {
+                            count,
+                            ..Default::default()
+                        },
+                        fragment: Some(wgpu::FragmentState {
+                            module: &vis_module,
+                            entry_point: Some(fs),
+                            compilation_options: Default::default(),
+                            targets: &[Some(wgpu::ColorTargetState {
+                                format,
+                                blend: None,
+                                write_mask: wgpu::ColorWrites::ALL,
+                            })],
+                        }),
+                        multiview_mask: mask,
+                        cache: None,
+                    })
                 })
+            };
+        let ids = wgpu::TextureFormat::R32Uint;
+        let vis_pipeline = vis_pipelines(1, "fs_main", ids, (&vis_module, "vs_main"), None);
+        // multiview (devices with the feature): a mask of the first `views` views, in an
+        // error scope of its own: where the device refuses them, one layer per pass
+        let vis_pipeline_views = (views > 1)
+            .then(|| {
+                let inner = device.push_error_scope(wgpu::ErrorFilter::Validation);
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("visibility_views.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(shaders::visibility_views_module().into()),
+                });
+                let mask = std::num::NonZeroU32::new(u32::MAX >> (32 - views.min(32)));
+                let p = vis_pipelines(1, "fs_main", ids, (&module, "vs_views"), mask);
+                pollster::block_on(inner.pop()).is_none().then_some(p)
             })
-        };
-        let vis_pipeline = vis_pipelines(1, "fs_main", wgpu::TextureFormat::R32Uint);
+            .flatten();
         // R32Float: multisampled in core WebGPU (R32Uint needs an adapter-specific feature)
-        let vis_pipeline_msaa =
-            vis_pipelines(MSAA as u32, "fs_float", wgpu::TextureFormat::R32Float);
-        let dummy_ids = IdTarget::new(device, "unused ids", 1, 1).array_view;
+        let vis_pipeline_msaa = vis_pipelines(
+            MSAA as u32,
+            "fs_float",
+            wgpu::TextureFormat::R32Float,
+            (&vis_module, "vs_main"),
+            None,
+        );
+        let dummy_ids = IdTarget::new(device, "unused ids", 1, 1, 1).array_view;
         let dummy_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("unused"),
             size: 16,
@@ -279,9 +306,16 @@ impl Pipelines {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(device_error(format!("pipeline creation failed: {e}")));
         }
+        let views = if vis_pipeline_views.is_some() {
+            views
+        } else {
+            1
+        };
         Ok(Pipelines {
             vis_layout,
             vis_pipeline,
+            vis_pipeline_views,
+            views,
             vis_pipeline_msaa,
             gather_layout,
             gather_pipeline,
@@ -342,13 +376,23 @@ impl Pipelines {
     }
 }
 
+/// Transforms padded to whole groups of `views` (the last repeated): a multiview pass draws
+/// every layer of its group, those past the chunk's end included (never read).
+fn pad_to_views(transforms: &mut Vec<[f32; 16]>, views: u32) {
+    let n = transforms.len().div_ceil(views as usize) * views as usize;
+    if let Some(&last) = transforms.last() {
+        transforms.resize(n, last);
+    }
+}
+
 /// A visibility render pass into an id target (cleared to 0) and its depth buffer (cleared
-/// to the far plane, not stored).
+/// to the far plane, not stored), of `views` layers by multiview when that is above 1.
 fn id_pass<'e>(
     enc: &'e mut wgpu::CommandEncoder,
     label: &str,
     ids: &wgpu::TextureView,
     depth: &wgpu::TextureView,
+    views: u32,
 ) -> wgpu::RenderPass<'e> {
     enc.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some(label),
@@ -371,7 +415,9 @@ fn id_pass<'e>(
         }),
         timestamp_writes: None,
         occlusion_query_set: None,
-        multiview_mask: None,
+        multiview_mask: (views > 1)
+            .then(|| std::num::NonZeroU32::new(u32::MAX >> (32 - views)))
+            .flatten(),
     })
 }
 
@@ -489,10 +535,11 @@ impl ChunkBindings {
         };
         // the receiver's raster transforms: attitude l, pass p at instance l P + p, its
         // samples moved to where the rasterizer samples (shaders/visibility.wgsl)
-        let tfs: Vec<[f32; 16]> = rots
+        let mut tfs: Vec<[f32; 16]> = rots
             .iter()
             .flat_map(|r| scene.shifts.iter().map(move |&t| raster_transform(r, t)))
             .collect();
+        pad_to_views(&mut tfs, gpu.pipelines.views);
         let tf_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("raster transforms"),
             contents: bytemuck::cast_slice(&tfs),
@@ -504,10 +551,11 @@ impl ChunkBindings {
         );
         // bistatic: R_tx = R_y(-beta) R, computed in f64 (wi -> +z)
         let tx_bg = beta.map(|beta| {
-            let tx_rots: Vec<[f32; 16]> = rots
+            let mut tx_rots: Vec<[f32; 16]> = rots
                 .iter()
                 .map(|r| raster_transform(&transmitter_rotation(r, beta), [0.0; 4]))
                 .collect();
+            pad_to_views(&mut tx_rots, gpu.pipelines.views);
             let buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("transmitter rotations"),
                 contents: bytemuck::cast_slice(&tx_rots),
@@ -607,13 +655,13 @@ pub(super) fn encode_chunk(
     let pl = &gpu.pipelines;
     let (n_s, n_pass) = (targets.samples, targets.n_pass);
     // the receiver's view, then (bistatic) the transmitter's
-    // (layer l K + k holds attitude l's sample k, drawn as instance l K + k)
+    // (layer l K + k holds attitude l's sample k, drawn with transform l K + k)
     let mut views_and_groups = vec![];
     if let Some(t) = &targets.rcv {
-        views_and_groups.push((&t.id_views, &t.depth_views, &bindings.vis, n_s));
+        views_and_groups.push((t, &bindings.vis, n_s));
     }
     if let (Some(bg), Some(t)) = (&bindings.tx, &targets.tx) {
-        views_and_groups.push((&t.id_views, &t.depth_views, bg, 1));
+        views_and_groups.push((t, bg, 1));
     }
     if let (Some(t), Some(gbg)) = (&targets.tiles, &targets.gather_bg) {
         // per attitude: its K / MSAA passes into the tiles, then their samples gathered
@@ -621,7 +669,7 @@ pub(super) fn encode_chunk(
         // rasterization does not depend on the attitude's place in the batch)
         let side = t.side as u32;
         for l in 0..m {
-            let mut pass = id_pass(enc, "visibility tiles", &t.view, &t.depth_view);
+            let mut pass = id_pass(enc, "visibility tiles", &t.view, &t.depth_view, 1);
             pass.set_pipeline(&pl.vis_pipeline_msaa[closed as usize]);
             pass.set_bind_group(0, &bindings.vis, &[]);
             for p in 0..n_pass {
@@ -639,13 +687,26 @@ pub(super) fn encode_chunk(
             pass.dispatch_workgroups(g, g, n_pass as u32);
         }
     }
-    for (views, dviews, bg, k_s) in views_and_groups {
-        for l in 0..m * k_s {
-            let mut pass = id_pass(enc, "visibility", &views[l], &dviews[l]);
-            pass.set_pipeline(&pl.vis_pipeline[closed as usize]);
+    // a pass per group of V layers: instance g V draws them, view v the layer g V + v
+    // (multiview), or V = 1 and a pass per layer
+    for (t, bg, k_s) in views_and_groups {
+        let v = t.views as usize;
+        let pipeline = match (&pl.vis_pipeline_views, v > 1) {
+            (Some(p), true) => &p[closed as usize],
+            _ => &pl.vis_pipeline[closed as usize],
+        };
+        for g in 0..(m * k_s).div_ceil(v) {
+            let mut pass = id_pass(
+                enc,
+                "visibility",
+                &t.id_views[g],
+                &t.depth_views[g],
+                t.views,
+            );
+            pass.set_pipeline(pipeline);
             pass.set_bind_group(0, bg, &[]);
-            let l = l as u32;
-            pass.draw(0..(3 * n_tri), l..l + 1);
+            let first = (g * v) as u32;
+            pass.draw(0..(3 * n_tri), first..first + 1);
         }
     }
     {

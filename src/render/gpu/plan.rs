@@ -99,13 +99,17 @@ pub(super) struct Plan {
     /// Output channels ([`SensorSetup::channels`]).
     pub channels: usize,
     /// Attitudes per chunk: every per-chunk buffer within the device's storage binding,
-    /// the layers within its limits, the chunk's device memory modest.
+    /// the layers within its limits, the chunk's device memory modest and its readback
+    /// within [`READBACK_BYTES`].
     pub chunk: usize,
     /// The fixed-point scale of the sums (before the uniform block rounds it to f32).
     pub fix_scale: f64,
     /// Side of the transmitter's id map ([`transmitter_map_width`]).
     pub tx_width: usize,
 }
+
+/// The most bytes of results one chunk reads back ([`Plan::chunk`]).
+pub(super) const READBACK_BYTES: u64 = 64 << 20;
 
 impl Plan {
     /// Check the uploads (`geometry`, the tables) against the device's storage binding and
@@ -183,6 +187,12 @@ impl Plan {
         };
         let mem_per = per_att.iter().sum::<u64>() + px * 4 * sensor.samples as u64 + shadow_maps;
         chunk = chunk.min(((512u64 << 20) / mem_per.max(1)).max(1) as usize);
+        // and its readback (images, range maps, profiles) within READBACK_BYTES: on an H200
+        // the full model (1.1 MiB a attitude at 128 x 128) ran at 4,500 attitudes/s in
+        // calls of 64 and 1,600/s in calls of 128 or 256 made of one chunk
+        // (docs/gpu-benchmark.md); chunks of a call share their buffers
+        let readback_per = per_att[0] + per_att[1] + per_att[2];
+        chunk = chunk.min((READBACK_BYTES / readback_per.max(1)).max(1) as usize);
         if chunk == 0 || biggest > max_binding {
             return Err(Error::param(
                 "resolution",

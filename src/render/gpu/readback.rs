@@ -22,15 +22,17 @@ pub(super) struct HostOutputs {
 }
 
 impl HostOutputs {
-    /// For `n` attitudes of `res x res` pixels, `channels` channels and `nb` bins: zeros,
-    /// the range NaN (nothing seen).
+    /// For `n` attitudes of `res x res` pixels, `channels` channels and `nb` bins: zeros
+    /// (allocated zeroed, so that pages are touched only when written: every element is
+    /// written by [`ResultBuffers::read_chunk`], the range NaN where nothing is seen; a
+    /// NaN fill cost 30 ms of host time a call of 1,024 range maps on an H200).
     pub(super) fn new(outputs: Outputs, n: usize, res: usize, channels: usize, nb: usize) -> Self {
         HostOutputs {
             n,
             image: outputs
                 .image
                 .then(|| vec![0.0f32; n * res * res * channels]),
-            range: outputs.range.then(|| vec![f32::NAN; n * res * res]),
+            range: outputs.range.then(|| vec![0.0f32; n * res * res]),
             coverage: outputs.range.then(|| vec![0.0f32; n * res * res]),
             profile: outputs.profile.then(|| vec![0.0f64; n * nb * channels]),
             total: vec![0.0f64; n * channels],

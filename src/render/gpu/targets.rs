@@ -41,29 +41,38 @@ fn id_textures(
 }
 
 /// A raster target of triangle ids (R32Uint, read by the shade kernel) with its depth
-/// buffer, `layers` attitudes deep: per-layer views for the raster passes, an array view
-/// for the kernel.
+/// buffer, `layers` attitudes (or samples) deep, rounded up to whole groups of `views`
+/// layers: a view per group for the raster passes (one layer each when `views` is 1, else
+/// `views`-layer arrays drawn by multiview), an array view of all layers for the kernel.
 pub(super) struct IdTarget {
     pub(super) array_view: wgpu::TextureView,
     pub(super) id_views: Vec<wgpu::TextureView>,
     pub(super) depth_views: Vec<wgpu::TextureView>,
+    /// Layers per pass (per view of `id_views` and `depth_views`).
+    pub(super) views: u32,
 }
 
 impl IdTarget {
-    pub(super) fn new(dev: &wgpu::Device, label: &str, side: u32, layers: u32) -> Self {
+    pub(super) fn new(dev: &wgpu::Device, label: &str, side: u32, layers: u32, views: u32) -> Self {
+        let views = views.max(1);
+        let groups = layers.div_ceil(views).max(1);
         let size = wgpu::Extent3d {
             width: side,
             height: side,
-            depth_or_array_layers: layers,
+            depth_or_array_layers: groups * views,
         };
         let (ids, depth) = id_textures(dev, label, size, 1, wgpu::TextureFormat::R32Uint);
-        let layer_views = |t: &wgpu::Texture| -> Vec<wgpu::TextureView> {
-            (0..layers)
-                .map(|l| {
+        let group_views = |t: &wgpu::Texture| -> Vec<wgpu::TextureView> {
+            (0..groups)
+                .map(|g| {
                     t.create_view(&wgpu::TextureViewDescriptor {
-                        dimension: Some(wgpu::TextureViewDimension::D2),
-                        base_array_layer: l,
-                        array_layer_count: Some(1),
+                        dimension: Some(if views > 1 {
+                            wgpu::TextureViewDimension::D2Array
+                        } else {
+                            wgpu::TextureViewDimension::D2
+                        }),
+                        base_array_layer: g * views,
+                        array_layer_count: Some(views),
                         ..Default::default()
                     })
                 })
@@ -74,8 +83,9 @@ impl IdTarget {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),
                 ..Default::default()
             }),
-            id_views: layer_views(&ids),
-            depth_views: layer_views(&depth),
+            id_views: group_views(&ids),
+            depth_views: group_views(&depth),
+            views,
         }
     }
 }
@@ -161,7 +171,8 @@ impl Targets {
             let max_dim = gpu.info.max_texture_dimension_2d as usize;
             (None, Some(MsaaTiles::new(dev, w + 2, n_pass, max_dim)))
         } else {
-            let t = IdTarget::new(dev, "visibility target", w as u32, (c * n_s) as u32);
+            let views = gpu.pipelines.views;
+            let t = IdTarget::new(dev, "visibility target", w as u32, (c * n_s) as u32, views);
             (Some(t), None)
         };
         // K >= 4: the gathered sample ids, and per attitude of a chunk its gather parameters
@@ -206,7 +217,8 @@ impl Targets {
             })
         });
         // bistatic: the triangle ids seen from the transmitter (same square, tx_width texels)
-        let tx = tx_width.map(|tw| IdTarget::new(dev, "transmitter target", tw, c as u32));
+        let tx = tx_width
+            .map(|tw| IdTarget::new(dev, "transmitter target", tw, c as u32, gpu.pipelines.views));
         Targets {
             rcv,
             tiles,
