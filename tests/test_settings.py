@@ -130,3 +130,33 @@ def test_stage_seconds_name_each_backends_stages_in_order(kw, stages) -> None:
     assert sum(r.stage_seconds.values()) <= wall
     if "tables" in stages:  # a new material: its tables are built in this call
         assert r.stage_seconds["tables"] == r.table_seconds > 0
+
+
+def _request(**kw):
+    base = dict(resolution=12, supersampling=1, samples=1, bistatic_angle=0.0, polarization=None,
+                intensity_only=False, sigma_range=0.015, bin_width=0.005, image=True, range=False,
+                profile=True, device="cpu")
+    return pprender._core.RenderRequest(**{**base, **kw})
+
+
+def test_one_request_object_crosses_into_rust() -> None:
+    """The binding takes one ``_core.RenderRequest`` (checked when built) with the
+    attitudes: reused for several calls and scenes, it renders what ``render`` does."""
+    req = _request()
+    assert "resolution=12" in repr(req)
+    scene = pprender.Scene(models.sphere(0.3, 2), pprender.Material("beckmann", alpha=0.3, eta=1.5))
+    a = scene._core.render(Q, req)
+    b = scene._core.render(Q, req)
+    np.testing.assert_array_equal(a["profile"], b["profile"])
+    sensor = pprender.Lidar(resolution=12, pixel_samples=1, bin_width=0.005)
+    c = scene._core.render(Q, _request(sigma_range=sensor.sigma_range))
+    r = pprender.render(scene, sensor, Q, outputs=("profile", "mueller"), device="cpu")
+    np.testing.assert_array_equal(r.profile.reshape(c["profile"].shape), c["profile"])
+
+
+@pytest.mark.parametrize("kw, name", [(dict(resolution=0), "resolution"), (dict(bin_width=-1.0), "bin_width"),
+                                      (dict(device="tpu"), "device"), (dict(samples=3), "samples"),
+                                      (dict(pulse_samples=[1.0, 2.0], pulse_spacing=0.0), "dt_range")])
+def test_a_bad_request_is_refused_when_built(kw, name) -> None:
+    with pytest.raises(pprender.Error, match=name):
+        _request(**kw)

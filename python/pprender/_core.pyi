@@ -244,6 +244,16 @@ class RenderScene:
     def render(
         self,
         rotations: npt.NDArray[np.float64],
+        request: RenderRequest,
+        *,
+        progress: Callable[[int, int], object] | None = None,
+    ) -> dict[str, Any]: ...
+
+class RenderRequest:
+    """What to render and on what: sensor set-up, outputs, backend, table grid (checked once)."""
+
+    def __new__(
+        cls,
         *,
         resolution: int,
         supersampling: int,
@@ -268,8 +278,7 @@ class RenderScene:
         n_psi_double: int | None = None,
         double_order: int | None = None,
         in_shader: bool = False,
-        progress: Callable[[int, int], object] | None = None,
-    ) -> dict[str, Any]: ...
+    ) -> RenderRequest: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
 def sample_offsets(k: int) -> npt.NDArray[np.float64]: ...

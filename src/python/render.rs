@@ -34,6 +34,106 @@ fn rows3(a: &PyReadonlyArray2<'_, f64>, name: &'static str) -> crate::Result<Vec
     Ok(v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
+/// What to render and on what ([`request::Request`] as a Python object): the sensor set-up,
+/// the outputs, the backend and the table grid, checked once when built. `device`:
+/// `"auto"`, `"cpu"`, `"gpu"`, `"twin"` (the kernel's f64 CPU twin with the same tables,
+/// `cpu::render_tables`) or `"reference"` (the f64 CPU reference, exact BRDFs, no tables:
+/// the table keywords are then unused). Python: `pprender.render` builds one per call.
+#[pyclass(module = "pprender._core", name = "RenderRequest", frozen)]
+pub struct PyRenderRequest {
+    sensor: SensorSetup,
+    outputs: Outputs,
+    backend: Backend,
+    table_options: BrdfTableOptions,
+}
+
+#[pymethods]
+impl PyRenderRequest {
+    #[new]
+    #[pyo3(signature = (*, resolution, supersampling, samples, bistatic_angle, polarization,
+        intensity_only, sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
+        pulse_spacing=0.0, analytic=false, n_z=None, n_psi=None, n_z_lambertian=None,
+        n_psi_lambertian=None, n_z_double=None, n_psi_double=None, double_order=None,
+        in_shader=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        resolution: usize,
+        supersampling: usize,
+        samples: usize,
+        bistatic_angle: f64,
+        polarization: Option<[f64; 4]>,
+        intensity_only: bool,
+        sigma_range: f64,
+        bin_width: f64,
+        image: bool,
+        range: bool,
+        profile: bool,
+        device: &str,
+        pulse_samples: Option<Vec<f64>>,
+        pulse_spacing: f64,
+        analytic: bool,
+        n_z: Option<usize>,
+        n_psi: Option<usize>,
+        n_z_lambertian: Option<usize>,
+        n_psi_lambertian: Option<usize>,
+        n_z_double: Option<usize>,
+        n_psi_double: Option<usize>,
+        double_order: Option<usize>,
+        in_shader: bool,
+    ) -> PyResult<Self> {
+        let sensor = SensorSetup {
+            resolution,
+            supersampling,
+            samples,
+            analytic,
+            bistatic_angle,
+            polarization,
+            intensity_only,
+            sigma_range,
+            bin_width,
+            pulse: pulse_samples
+                .map(|v| SampledPulse::new(&v, pulse_spacing).map(Arc::new))
+                .transpose()?,
+        };
+        crate::render::check_sensor(&sensor)?;
+        Ok(PyRenderRequest {
+            sensor,
+            outputs: Outputs {
+                image,
+                range,
+                profile,
+            },
+            backend: Backend::parse(device)?,
+            table_options: table_options(
+                n_z,
+                n_psi,
+                n_z_lambertian,
+                n_psi_lambertian,
+                n_z_double,
+                n_psi_double,
+                double_order,
+                in_shader,
+            ),
+        })
+    }
+
+    fn __repr__(&self) -> String {
+        let s = &self.sensor;
+        format!(
+            "RenderRequest(resolution={}, supersampling={}, samples={}, bistatic_angle={}, \
+             image={}, range={}, profile={}, backend={:?})",
+            s.resolution,
+            s.supersampling,
+            s.samples,
+            s.bistatic_angle,
+            self.outputs.image,
+            self.outputs.range,
+            self.outputs.profile,
+            self.backend
+        )
+    }
+}
+
 /// Table grid overrides from Python (`None`: the default of `BrdfTableOptions::resolve`).
 #[allow(clippy::too_many_arguments)]
 fn table_options(
@@ -190,81 +290,27 @@ impl PyRenderScene {
     }
 
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope, or (n, 4) unit quaternions
-    /// `(w, x, y, z)`. Returns a dict of arrays, `table_seconds`, the time spent building
-    /// the materials' tables in this call (0 when cached), and `stage_seconds`, the
-    /// wall-clock seconds of the render's stages ([`crate::render::Rendered::stage_seconds`]
-    /// and the conversion to NumPy). `progress(done, total)` is called
-    /// as attitudes are done; an exception it raises (or Ctrl-C) stops the render.
-    /// `device = "reference"`: the f64 CPU reference (`cpu::render_reference`, exact
-    /// BRDFs, no tables; the table keywords are then unused). `device = "twin"`: the
-    /// kernel's f64 CPU twin with the same tables (`cpu::render_tables`).
-    #[pyo3(signature = (rotations, *, resolution, supersampling, samples, bistatic_angle, polarization,
-        intensity_only,
-        sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
-        pulse_spacing=0.0, analytic=false, n_z=None, n_psi=None, n_z_lambertian=None, n_psi_lambertian=None,
-        n_z_double=None, n_psi_double=None, double_order=None, in_shader=false, progress=None))]
-    #[allow(clippy::too_many_arguments)]
+    /// `(w, x, y, z)`, as `request` asks ([`PyRenderRequest`]). Returns a dict of arrays,
+    /// `table_seconds`, the time spent building the materials' tables in this call (0 when
+    /// cached), and `stage_seconds`, the wall-clock seconds of the render's stages
+    /// ([`crate::render::Rendered::stage_seconds`] and the conversion to NumPy).
+    /// `progress(done, total)` is called as attitudes are done; an exception it raises (or
+    /// Ctrl-C) stops the render.
+    #[pyo3(signature = (rotations, request, *, progress=None))]
     fn render<'py>(
         &self,
         py: Python<'py>,
         rotations: PyReadonlyArrayDyn<'py, f64>,
-        resolution: usize,
-        supersampling: usize,
-        samples: usize,
-        bistatic_angle: f64,
-        polarization: Option<[f64; 4]>,
-        intensity_only: bool,
-        sigma_range: f64,
-        bin_width: f64,
-        image: bool,
-        range: bool,
-        profile: bool,
-        device: &str,
-        pulse_samples: Option<Vec<f64>>,
-        pulse_spacing: f64,
-        analytic: bool,
-        n_z: Option<usize>,
-        n_psi: Option<usize>,
-        n_z_lambertian: Option<usize>,
-        n_psi_lambertian: Option<usize>,
-        n_z_double: Option<usize>,
-        n_psi_double: Option<usize>,
-        double_order: Option<usize>,
-        in_shader: bool,
+        request: &PyRenderRequest,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let opts = table_options(
-            n_z,
-            n_psi,
-            n_z_lambertian,
-            n_psi_lambertian,
-            n_z_double,
-            n_psi_double,
-            double_order,
-            in_shader,
-        );
         let rots = attitudes(rotations)?;
-        let backend = Backend::parse(device)?;
-        let sensor = SensorSetup {
-            resolution,
-            supersampling,
-            samples,
-            analytic,
-            bistatic_angle,
-            polarization,
-            intensity_only,
-            sigma_range,
-            bin_width,
-            pulse: pulse_samples
-                .map(|v| SampledPulse::new(&v, pulse_spacing).map(Arc::new))
-                .transpose()?,
-        };
-        crate::render::check_sensor(&sensor)?;
-        let outputs = Outputs {
-            image,
-            range,
-            profile,
-        };
+        let (sensor, outputs, backend, opts) = (
+            &request.sensor,
+            request.outputs,
+            request.backend,
+            &request.table_options,
+        );
         let mesh = self.mesh.clone();
         // The callback runs with the GIL (from worker threads on the CPU backends). An
         // exception it raises, or a pending KeyboardInterrupt, stops the render and is raised.
@@ -286,10 +332,10 @@ impl PyRenderScene {
         };
         let out = py.detach(|| {
             let request = request::Request {
-                sensor: &sensor,
+                sensor,
                 outputs,
                 backend,
-                table_options: &opts,
+                table_options: opts,
             };
             request::render(&mesh, &self.tables, &request, &rots, Some(&report))
         });
@@ -432,6 +478,7 @@ fn device_info<'py>(py: Python<'py>, device: &str) -> PyResult<Bound<'py, PyDict
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderScene>()?;
+    m.add_class::<PyRenderRequest>()?;
     m.add_function(wrap_pyfunction!(quaternions_to_rotations, m)?)?;
     m.add_function(wrap_pyfunction!(sample_offsets, m)?)?;
     m.add_function(wrap_pyfunction!(device_info, m)?)?;

@@ -227,8 +227,7 @@ def render(
     res = st.effective_resolution(scene.radius, sensor.range_fwhm)
     _check_framing(scene, res * int(st.supersampling))
     pol = None if sensor.polarization is None else [float(x) for x in sensor.polarization]
-    d = scene._core.render(
-        rot,
+    request = _core.RenderRequest(
         resolution=res,
         supersampling=int(st.supersampling),
         samples=st.effective_pixel_samples(),
@@ -244,9 +243,9 @@ def render(
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
         analytic=st.coverage == "analytic",
-        progress=progress,
         **topts,
     )
+    d = scene._core.render(rot, request, progress=progress)
     n = len(rot)
     mueller_out = pol is None
     tot = d["total"]
