@@ -66,3 +66,13 @@ def test_a_meaningless_views_setting_is_ignored(tmp_path, value) -> None:
     """Only a positive integer caps the views; anything else leaves the device's count."""
     r = _render_in_subprocess(tmp_path, value)
     assert int(r["views"]) == pprender.device_info("cpu")["raster_views"]
+
+
+def test_the_views_benchmark_runs_and_finds_the_outputs_equal(capsys) -> None:
+    """benchmarks/bench_raster_views.py at a tiny size: both view counts, equal outputs."""
+    import bench_raster_views
+
+    assert bench_raster_views.main(["--device", "cpu", "--rounds", "1", "--batches", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "outputs identical across view counts: yes" in out
+    assert "| 1 | profile only (Stokes, H) | 2 |" in out
