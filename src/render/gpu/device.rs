@@ -3,7 +3,8 @@
 //! [`Gpu`] (device, queue and pipelines, [`super::passes`]) per choice. Errors are caught by
 //! error scopes ([`error_scoped`]) and reported as [`Error::Device`].
 
-use super::passes::Pipelines;
+use super::pipelines::Pipelines;
+use super::util::device_error;
 use crate::error::{Error, Result};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -70,10 +71,6 @@ pub fn context(choice: DeviceChoice) -> Result<Arc<Gpu>> {
     let g = Arc::new(Gpu::new(choice)?);
     map.insert(choice, g.clone());
     Ok(g)
-}
-
-pub(super) fn device_error(msg: impl Into<String>) -> Error {
-    Error::Device(msg.into())
 }
 
 const NO_ADAPTER_HINT: &str = "install a Vulkan driver: on Debian/Ubuntu `apt install \
@@ -190,38 +187,4 @@ fn raster_views(adapter: &wgpu::Adapter) -> u32 {
         .min(31)
         .min(cap)
         .max(1)
-}
-
-/// Run `f` inside validation and out-of-memory error scopes on `dev`: an error either
-/// scope caught is returned in place of `f`'s result (out of memory first).
-pub(super) fn error_scoped<T>(dev: &wgpu::Device, f: impl FnOnce() -> Result<T>) -> Result<T> {
-    let scope_v = dev.push_error_scope(wgpu::ErrorFilter::Validation);
-    let scope_m = dev.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-    let result = f();
-    let oom = pollster::block_on(scope_m.pop());
-    let val = pollster::block_on(scope_v.pop());
-    if let Some(e) = oom {
-        return Err(device_error(format!(
-            "out of device memory (try a smaller resolution or batch): {e}"
-        )));
-    }
-    if let Some(e) = val {
-        return Err(device_error(format!("wgpu validation error: {e}")));
-    }
-    result
-}
-
-/// A buffer of `size` bytes (at least 16: no binding is empty).
-pub(super) fn create_buffer(
-    dev: &wgpu::Device,
-    label: &str,
-    size: u64,
-    usage: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    dev.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(16),
-        usage,
-        mapped_at_creation: false,
-    })
 }

@@ -15,14 +15,16 @@
 //! shadows; monostatic neither the pass nor the test exists. Conventions: [`crate::render`].
 //!
 //! The files, in the order a render runs through them:
-//! - `device.rs`: the adapter and device ([`DeviceChoice`], [`context`], [`Gpu`]) and the
-//!   error scopes around a render;
+//! - `util.rs`: the device error, the error scopes around a render, buffer creation;
+//! - `device.rs`: the adapter and device ([`DeviceChoice`], [`context`], [`Gpu`]);
+//! - `pipelines.rs`: the pipelines a device compiles once (visibility, gather, the shade
+//!   kernel per key of override constants);
 //! - `plan.rs`: what the kernel computes ([`KernelOutputs`]), the device-limit checks, the
 //!   chunk size and fixed-point scale;
 //! - `pack.rs`: every byte layout the kernels read (geometry, [`GpuTables`],
 //!   [`ShadeParams`] and the other uniform blocks);
-//! - `passes.rs` and `targets.rs`: the pipelines, the raster targets, the bind groups and
-//!   the passes encoded per chunk;
+//! - `passes.rs` and `targets.rs`: the raster targets, the bind groups and the passes
+//!   encoded per chunk;
 //! - `readback.rs`: the output buffers, mapping, fixed-point decoding, the sampled pulse's
 //!   host profile ([`host_profile`]) and downsampling.
 //!
@@ -33,9 +35,11 @@
 mod device;
 mod pack;
 mod passes;
+mod pipelines;
 mod plan;
 mod readback;
 mod targets;
+mod util;
 
 pub use device::{context, DeviceChoice, DeviceInfo, Gpu};
 pub use pack::{
@@ -48,7 +52,7 @@ pub use readback::host_profile;
 use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
 use super::geometry::{Mesh, Rot};
 use crate::error::Result;
-use passes::{encode_chunk, ChunkBindings, SceneBuffers, ShadeKey};
+use passes::{encode_chunk, shade_key, ChunkBindings, SceneBuffers};
 use plan::Plan;
 use std::time::Instant;
 use readback::{HostOutputs, ResultBuffers};
@@ -108,7 +112,7 @@ pub fn render_with_progress(
     let params = ShadeParams::new(mesh, &lay, sensor, plan.fix_scale, plan.tx_width);
     let fix_scale = params.fix_scale as f64; // what the kernel uses
     let planned = t0.elapsed().as_secs_f64();
-    let mut r = device::error_scoped(&gpu.device, || {
+    let mut r = util::error_scoped(&gpu.device, || {
         render_chunks(
             gpu, mesh, &geometry, tables, &params, fix_scale, &plan, &lay, sensor, rotations,
             outputs, progress,
@@ -142,7 +146,7 @@ fn render_chunks(
     let dev = &gpu.device;
     let t0 = Instant::now();
     let n = rotations.len();
-    let key = ShadeKey::new(plan, sensor, tables);
+    let key = shade_key(plan, sensor, tables);
     let pipeline = gpu.pipelines.shade_pipeline(dev, key)?;
     let scene = SceneBuffers::new(dev, geometry, tables, params, lay, sensor.samples);
     let c = plan.chunk.min(n);
@@ -182,7 +186,7 @@ fn render_chunks(
         encoding += t.elapsed().as_secs_f64();
         let t = Instant::now();
         dev.poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| device::device_error(format!("device poll failed: {e}")))?;
+            .map_err(|e| util::device_error(format!("device poll failed: {e}")))?;
         waiting += t.elapsed().as_secs_f64();
         let t = Instant::now();
         results.read_chunk(dev, start, m, &mut host)?;

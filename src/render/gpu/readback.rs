@@ -3,8 +3,8 @@
 //! accumulated on the host in f64 ([`host_profile`]) and the images downsampled to the
 //! sensor's pixels into the batch's arrays ([`HostOutputs`]).
 
-use super::device::{create_buffer, device_error};
 use super::plan::{KernelOutputs, Plan};
+use super::util::{create_buffer, device_error};
 use crate::error::Result;
 use crate::render::api::{Layout, Outputs, Rendered, SensorSetup};
 use crate::render::downsample::{downsample_range, downsample_sum};

@@ -3,8 +3,9 @@
 //! `K >= 4` visibility samples the tiles of one multisampled texture ([`MsaaTiles`])
 //! gathered into a buffer; bistatic, the transmitter's layers too ([`Targets`]).
 
-use super::device::{create_buffer, Gpu};
+use super::device::Gpu;
 use super::pack::gather_params;
+use super::util::create_buffer;
 use crate::render::samples::MSAA;
 use wgpu::util::DeviceExt;
 
