@@ -314,7 +314,7 @@ fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32
                         if (bitcast<u32>(tables[blk]) == 0u) {
                             add_single_in_kernel(blk, g, wi, wo, x_in, x_out, &m);
                         } else {
-                            add_lambertian_in_kernel(blk, g, &m);
+                            add_depolarizing_in_kernel(blk, g, &m);
                         }
                     }
                 }

@@ -1,5 +1,5 @@
 // ---- terms evaluated in the kernel (IN_SHADER; twins: SingleParams::eval and
-// LambertianParams::eval in src/brdf/table.rs, through BrdfTable::eval_masked) ----
+// DepolarizingParams::eval in src/brdf/table.rs, through BrdfTable::eval_masked) ----
 // The material's words at `blk` (SingleParams::words): kind 0, distribution kind and m or
 // alpha, perfect-conductor flag, n - 1 and k, the masking-excess table (scale, correlation
 // kind, intervals, values). All vectors are in the telescope frame.
@@ -121,11 +121,11 @@ fn add_single_in_kernel(blk: u32, g: Local, wi: vec3<f32>, wo: vec3<f32>, x_in: 
 }
 
 // Adds the multiple + diffuse terms times cos(theta_i) to acc[0] (M00 only; twin:
-// LambertianParams::eval in src/brdf/table.rs): per term c (1 - E(theta_i)) (1 - E(theta_o))
-// from the material's albedo table E. Words at `blk` (LambertianParams::words): kind 1,
+// DepolarizingParams::eval in src/brdf/table.rs): per term c (1 - E(theta_i)) (1 - E(theta_o))
+// from the material's albedo table E. Words at `blk` (DepolarizingParams::words): kind 1,
 // the z scale, the number of terms, then per term c, s_f (0: E in z; else in
 // zeta = (z + z_1 + z_sf) / 3, material.rs zeta_of), intervals, values.
-fn add_lambertian_in_kernel(blk: u32, g: Local, acc: ptr<function, array<f32, 16>>) {
+fn add_depolarizing_in_kernel(blk: u32, g: Local, acc: ptr<function, array<f32, 16>>) {
     let ci = g.ci;
     let co = g.co;
     let si = g.si;

@@ -410,7 +410,7 @@ impl Material {
 
     /// Analytic hemispherical integrals of the multiple and diffuse terms for incidence
     /// `(c, s)`: `int f cos(theta_o) d omega_o` = `(1 - E(wi)) F_ms` and `rho_d (1 - E_s(wi))`.
-    pub fn lambertian_albedo(&self, c: f64, s: f64) -> (f64, f64) {
+    pub fn depolarizing_albedo(&self, c: f64, s: f64) -> (f64, f64) {
         let ms = if self.spec.terms.multiple {
             let t = self.e_white.as_ref().unwrap();
             if t.e_avg < 1.0 - 1e-14 {

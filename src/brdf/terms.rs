@@ -52,8 +52,8 @@ fn term_albedo(mat: &Material, term: Term, ci: f64, si: f64, n: usize) -> f64 {
     match term {
         Term::Single => single_albedo(mat, ci, true, n),
         Term::Double => mat.double_albedo([si, 0.0, ci], n.min(128)),
-        Term::Multiple => mat.lambertian_albedo(ci, si).0,
-        Term::Diffuse => mat.lambertian_albedo(ci, si).1,
+        Term::Multiple => mat.depolarizing_albedo(ci, si).0,
+        Term::Diffuse => mat.depolarizing_albedo(ci, si).1,
     }
 }
 

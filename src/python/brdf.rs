@@ -738,7 +738,7 @@ fn brdf_table(
     };
     let opts = BrdfTableOptions {
         single: PartOptions { n_z, n_psi, scale },
-        lambertian: PartOptions {
+        depolarizing: PartOptions {
             n_z: n_z_lambertian,
             n_psi: n_psi_lambertian,
             scale: scale_lambertian,

@@ -153,7 +153,7 @@ fn table_options(
     };
     BrdfTableOptions {
         single: part(n_z, n_psi),
-        lambertian: part(n_z_lambertian, n_psi_lambertian),
+        depolarizing: part(n_z_lambertian, n_psi_lambertian),
         double: part(n_z_double, n_psi_double),
         double_order,
         frame: None,

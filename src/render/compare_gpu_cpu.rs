@@ -103,7 +103,7 @@ fn kernel_twin_core(
     let tables = GpuTables::pack(&[PartRef::of(table)], beta).unwrap();
     assert_eq!(
         tables.in_shader,
-        table.single.is_some() || table.lambertian.is_some()
+        table.single.is_some() || table.depolarizing.is_some()
     );
     let mut sensor = lambert_sensor(64);
     sensor.bistatic_angle = beta;
@@ -175,7 +175,7 @@ fn kernel_matches_twin_and_core_per_pixel() {
 
 /// The single, multiple and diffuse terms evaluated in the kernel (`in_shader`: no
 /// tables for them) against their f64 twins ([`crate::brdf::table::SingleParams::eval`],
-/// [`crate::brdf::table::LambertianParams::eval`]) and the twin
+/// [`crate::brdf::table::DepolarizingParams::eval`]) and the twin
 /// against the exact core BRDF, per pixel, monostatic and 2 deg bistatic, on the
 /// oblique smooth sphere, for materials that span the model's switches and extremes:
 /// APS with the seed's and APS correlation (the material's own masking table, so the
@@ -253,7 +253,7 @@ fn in_shader_matches_twin_and_core_per_pixel() {
             };
             let table = BrdfTable::build(mat, beta, &opts).unwrap();
             assert!(table.single.is_some() && !table.kinds.contains(&PartKind::Single));
-            assert_eq!(table.lambertian.is_some(), mat.spec.terms.multiple);
+            assert_eq!(table.depolarizing.is_some(), mat.spec.terms.multiple);
             assert!(table.parts.is_empty());
             let out = Outputs {
                 image: true,

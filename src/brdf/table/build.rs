@@ -3,7 +3,7 @@
 
 use super::coords::{bisector_bases, table_dirs};
 use super::grid::{default_grid, PartGrid, PartKind, MAX_NODES, MAX_TOTAL_NODES};
-use super::params::{LambertianParams, SingleParams};
+use super::params::{DepolarizingParams, SingleParams};
 use super::{BrdfTable, TableFrame, TablePart};
 use crate::brdf::material::Material;
 use crate::microfacet::masking::ZTable;
@@ -38,15 +38,15 @@ pub struct BrdfTableOptions {
     /// The single term's grid.
     pub single: PartOptions,
     /// The grid of the multiple + diffuse terms.
-    pub lambertian: PartOptions,
+    pub depolarizing: PartOptions,
     /// The double bounce's grid.
     pub double: PartOptions,
     /// Quadrature order of the double bounce in the table.
     pub double_order: Option<usize>,
     pub frame: Option<TableFrame>,
     /// Evaluate the single term ([`SingleParams`]) and the multiple + diffuse terms
-    /// ([`LambertianParams`]) per lookup from the material's parameters and 1D tables (in
-    /// the kernel: `add_single_in_kernel`, `add_lambertian_in_kernel` in
+    /// ([`DepolarizingParams`]) per lookup from the material's parameters and 1D tables (in
+    /// the kernel: `add_single_in_kernel`, `add_depolarizing_in_kernel` in
     /// `shaders/shared/in_kernel.wgsl`) instead of tabulating them; the double bounce stays
     /// tabulated.
     pub in_shader: bool,
@@ -77,8 +77,8 @@ impl BrdfTableOptions {
             ),
             (
                 t.multiple || t.diffuse,
-                PartKind::Lambertian,
-                &self.lambertian,
+                PartKind::Depolarizing,
+                &self.depolarizing,
                 ["n_z_lambertian", "n_psi_lambertian", "scale_lambertian"],
             ),
             (
@@ -138,7 +138,7 @@ pub(super) fn part_material(mat: &Material, kind: PartKind) -> Material {
             t.multiple = false;
             t.diffuse = false;
         }
-        PartKind::Lambertian => {
+        PartKind::Depolarizing => {
             t.single = false;
             t.double = false;
         }
@@ -158,7 +158,7 @@ pub(super) fn part_reference(
 ) -> Mat4 {
     let (wi, wo) = table_dirs(beta, theta, psi);
     let m = match kind {
-        PartKind::Single | PartKind::Lambertian => crate::brdf::eval(mat, wi, wo, Frame::Sp),
+        PartKind::Single | PartKind::Depolarizing => crate::brdf::eval(mat, wi, wo, Frame::Sp),
         PartKind::Double(order) => crate::brdf::double::eval_double(
             mat,
             wi,
@@ -245,7 +245,7 @@ impl BrdfTable {
         let mut parts = vec![];
         let mut kinds = vec![];
         let mut single = None;
-        let mut lambertian = None;
+        let mut depolarizing = None;
         for g in grids {
             if opts.in_shader {
                 match g.kind {
@@ -253,8 +253,8 @@ impl BrdfTable {
                         single = Some(SingleParams::new(mat));
                         continue;
                     }
-                    PartKind::Lambertian => {
-                        lambertian = Some(LambertianParams::new(mat));
+                    PartKind::Depolarizing => {
+                        depolarizing = Some(DepolarizingParams::new(mat));
                         continue;
                     }
                     PartKind::Double(_) => {}
@@ -301,7 +301,7 @@ impl BrdfTable {
             kinds,
             parts,
             single,
-            lambertian,
+            depolarizing,
         })
     }
 }

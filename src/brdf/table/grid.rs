@@ -10,8 +10,9 @@ pub const MAX_TOTAL_NODES: usize = 1 << 22;
 pub enum PartKind {
     /// The single bounce.
     Single,
-    /// The multiple and diffuse terms (whichever are enabled; depolarizing).
-    Lambertian,
+    /// The multiple and diffuse terms (whichever are enabled): depolarizing, and separable
+    /// in the two directions (each a product of functions of theta_i and theta_o).
+    Depolarizing,
     /// The double bounce (with its coherent backscatter as configured) at this order.
     Double(usize),
 }
@@ -20,7 +21,7 @@ impl PartKind {
     pub fn name(&self) -> &'static str {
         match self {
             PartKind::Single => "single",
-            PartKind::Lambertian => "multiple+diffuse",
+            PartKind::Depolarizing => "multiple+diffuse",
             PartKind::Double(_) => "double",
         }
     }
@@ -46,7 +47,7 @@ pub fn default_grid(kind: PartKind, alpha: f64, _beta: f64) -> (usize, usize, f6
     match kind {
         PartKind::Single => (256, 32, 1.0 / alpha.sqrt()),
         // the material's table scale (`Distribution::table_scale`)
-        PartKind::Lambertian => (256, 8, alpha.min(1.0)),
+        PartKind::Depolarizing => (256, 8, alpha.min(1.0)),
         PartKind::Double(_) => (32, 8, 1.0),
     }
 }

@@ -35,7 +35,7 @@ pub use error::{PartError, TableError, DYNAMIC_RANGE};
 pub use grid::{cell, default_grid, z_of, PartGrid, PartKind, MAX_NODES, MAX_TOTAL_NODES};
 pub use interp::{catmull_rom, catmull_rom_ends, eval_part};
 pub use monostatic::MonostaticTable;
-pub use params::{LambertianParams, SingleParams};
+pub use params::{DepolarizingParams, SingleParams};
 
 use crate::optics::frames::{beam_bases, Frame, V3};
 use crate::optics::mueller::Mat4;
@@ -136,7 +136,7 @@ pub struct BrdfTable {
     /// ([`BrdfTableOptions::in_shader`]); it is then not among `parts`.
     pub single: Option<SingleParams>,
     /// Likewise the multiple + diffuse terms.
-    pub lambertian: Option<LambertianParams>,
+    pub depolarizing: Option<DepolarizingParams>,
 }
 
 impl BrdfTable {
@@ -161,7 +161,7 @@ impl BrdfTable {
                 }
             }
         }
-        if self.single.is_some() || self.lambertian.is_some() {
+        if self.single.is_some() || self.depolarizing.is_some() {
             let (wi, wo) = table_dirs(self.beta, sin_t.atan2(cos_t), a);
             if let Some(single) = &self.single {
                 let pm = single.eval(wi, wo, table_bases(self.frame, wi, wo));
@@ -171,7 +171,7 @@ impl BrdfTable {
                     }
                 }
             }
-            if let Some(l) = &self.lambertian {
+            if let Some(l) = &self.depolarizing {
                 m[0][0] += l.eval(wi, wo);
             }
         }

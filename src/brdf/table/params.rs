@@ -1,7 +1,7 @@
 //! The in-kernel parameter blocks: what the kernel needs to evaluate the single and the
 //! multiple + diffuse terms per lookup instead of reading a table
 //! ([`super::BrdfTableOptions::in_shader`]), their f64 twins and the words uploaded for
-//! `add_single_in_kernel` and `add_lambertian_in_kernel` (`shaders/shared/in_kernel.wgsl`).
+//! `add_single_in_kernel` and `add_depolarizing_in_kernel` (`shaders/shared/in_kernel.wgsl`).
 
 use super::coords::{bisector_bases, table_dirs};
 use super::grid::{default_grid, z_of, PartKind};
@@ -21,14 +21,14 @@ use std::f64::consts::PI;
 /// `F_ms / (pi (1 - E_avg))` or `rho_d / (pi (1 - E_avg))` (0 where `1 - E_avg <= 1e-14`,
 /// as [`Material::multiple_z`]), so the value is the core's.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LambertianParams {
+pub struct DepolarizingParams {
     /// `s` of the material's `z` ([`Distribution::table_scale`]).
     pub table_scale: f64,
     /// `(E, c)` per enabled term.
     pub terms: Vec<(crate::brdf::material::AlbedoTable, f64)>,
 }
 
-impl LambertianParams {
+impl DepolarizingParams {
     pub fn new(mat: &Material) -> Self {
         let coef = |t: &crate::brdf::material::AlbedoTable, x: f64| {
             let denom = PI * (1.0 - t.e_avg);
@@ -47,7 +47,7 @@ impl LambertianParams {
             let t = mat.e_spec.as_ref().expect("diffuse term enabled");
             terms.push((t.clone(), coef(t, mat.spec.diffuse_albedo)));
         }
-        LambertianParams {
+        DepolarizingParams {
             table_scale: mat.spec.distribution.table_scale(),
             terms,
         }
@@ -80,7 +80,7 @@ impl LambertianParams {
         self.terms.iter().map(|(_, c)| c).sum()
     }
 
-    /// The words the kernel reads (`add_lambertian_in_kernel`, `shaders/shared/in_kernel.wgsl`):
+    /// The words the kernel reads (`add_depolarizing_in_kernel`, `shaders/shared/in_kernel.wgsl`):
     /// `[1 (the kind; u32 bits), table scale, terms (u32 bits)]`, then per term
     /// `[c, s_f (0: the table is in z), intervals (u32 bits), its n + 1 values]`.
     pub fn words(&self) -> Vec<f32> {

@@ -173,7 +173,7 @@ fn nodes_equal_direct_evaluation() {
         };
         let opts = BrdfTableOptions {
             single: grid(8),
-            lambertian: grid(12),
+            depolarizing: grid(12),
             double: grid(4),
             double_order: Some(12),
             frame: Some(frame),
@@ -366,7 +366,7 @@ fn bad_options_are_rejected() {
     };
     assert!(b(0.1, o).to_string().contains("n_psi"));
     let o = BrdfTableOptions {
-        lambertian: PartOptions {
+        depolarizing: PartOptions {
             scale: Some(0.0),
             ..Default::default()
         },
@@ -381,7 +381,7 @@ fn bad_options_are_rejected() {
 }
 
 /// Exploration: `TABLE_EXPLORE="dist alpha eta_re eta_im double beta_deg
-/// [n_z n_psi scale]x3 (single, lambertian, double; 0 = default) order frame; ..."`
+/// [n_z n_psi scale]x3 (single, depolarizing, double; 0 = default) order frame; ..."`
 /// (frame: sp|bis).
 #[test]
 #[ignore]
@@ -406,7 +406,7 @@ fn explore() {
         };
         let opts = BrdfTableOptions {
             single: grid(6),
-            lambertian: grid(9),
+            depolarizing: grid(9),
             double: grid(12),
             double_order: opt(num(15)).map(|x| x as usize),
             frame: Some(if f[16] == "sp" {

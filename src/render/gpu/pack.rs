@@ -198,7 +198,7 @@ pub struct GpuTables {
 
 /// `n_psi` header word of a part evaluated in the kernel (`n_z` word 0, offset: its
 /// words, [`crate::brdf::table::SingleParams::words`] or
-/// [`crate::brdf::table::LambertianParams::words`], the first of which is its kind).
+/// [`crate::brdf::table::DepolarizingParams::words`], the first of which is its kind).
 pub const SHADER_PART: u32 = u32::MAX;
 /// Margin on the sampled bound of an in-kernel part's `M00 cos(theta_i)` for
 /// [`GpuTables::max_m00`] (it is sampled at nodes, and the kernel clamps a pixel at the
@@ -226,7 +226,7 @@ pub struct PartRef<'a> {
 #[derive(Clone, Copy)]
 pub enum InKernel<'a> {
     Single(&'a crate::brdf::table::SingleParams),
-    Lambertian(&'a crate::brdf::table::LambertianParams),
+    Depolarizing(&'a crate::brdf::table::DepolarizingParams),
 }
 
 impl<'a> From<&'a crate::brdf::table::TablePart> for PartRef<'a> {
@@ -257,12 +257,12 @@ impl<'a> PartRef<'a> {
             shader: Some(k),
         };
         let single = t.single.iter().map(|p| in_kernel(InKernel::Single(p)));
-        let lambertian = t
-            .lambertian
+        let depolarizing = t
+            .depolarizing
             .iter()
-            .map(|p| in_kernel(InKernel::Lambertian(p)));
+            .map(|p| in_kernel(InKernel::Depolarizing(p)));
         single
-            .chain(lambertian)
+            .chain(depolarizing)
             .chain(t.parts.iter().map(PartRef::from))
             .collect()
     }
@@ -293,7 +293,7 @@ impl GpuTables {
                             data.extend(sp.words());
                             sum_max += SHADER_PART_MARGIN * sp.max_m00_cos(beta);
                         }
-                        InKernel::Lambertian(lp) => {
+                        InKernel::Depolarizing(lp) => {
                             data.extend(lp.words());
                             sum_max += lp.max_m00_cos();
                         }
