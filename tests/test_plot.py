@@ -117,3 +117,17 @@ def test_corner_plot(rng):
     assert len(plot.corner(samples[:, 0]).axes) == 1
     with pytest.raises(pprender.Error, match="names"):
         plot.corner(samples, names=["a"])
+
+
+def test_index_counts_from_the_end_and_the_message_says_so(renders):
+    """A negative ``index`` selects from the end (as NumPy does) and the error's range says
+    so; a bool is not an index."""
+    mu, _ = renders
+    n = len(mu.mueller)
+    last = plot.stokes_images(mu, index=-1, normalized=False).axes[0].images[0].get_array()
+    np.testing.assert_allclose(last, plot.stokes_images(mu, index=n - 1, normalized=False).axes[0].images[0].get_array())
+    for bad in (n, -n - 1, True, 1.0):
+        with pytest.raises(pprender.Error, match=rf"index = .*\[-{n}, {n}\) \(negative counts from the end\)"):
+            plot.stokes_images(mu, index=bad)
+    with pytest.raises(pprender.Error, match=r"\[-2, 2\) \(negative counts from the end\)"):
+        plot.profile(np.ones((2, 5, 4)), bin_edges=np.arange(6.0), index=2)

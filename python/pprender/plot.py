@@ -61,8 +61,8 @@ def _stokes_image(result: Any, index: int, input_state: Any) -> tuple[np.ndarray
         m = None
     else:
         raise Error('invalid result: no image; render with outputs=("mueller",) or ("stokes",)')
-    if not isinstance(index, (int, np.integer)) or not -n <= index < n:
-        raise Error(f"invalid index = {index!r}: an integer in [0, {n})")
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -n <= index < n:
+        raise Error(f"invalid index = {index!r}: an integer in [-{n}, {n}) (negative counts from the end)")
     if m is not None:
         mi = m[index]
         s = mi @ _state(input_state)
@@ -241,8 +241,9 @@ def profile(data: Any, *, bin_edges: Any = None, index: int = 0, input_state: Se
         if a.ndim == core:
             return a
         flat = a.reshape((-1,) + a.shape[-core:])
-        if not isinstance(index, (int, np.integer)) or not -len(flat) <= index < len(flat):
-            raise Error(f"invalid index = {index!r}: an integer in [0, {len(flat)})")
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -len(flat) <= index < len(flat):
+            raise Error(f"invalid index = {index!r}: an integer in [-{len(flat)}, {len(flat)}) (negative counts "
+                        "from the end)")
         return flat[index]
 
     if isinstance(data, Measurement):
