@@ -519,7 +519,6 @@ def write_chunk(
     chunk: Chunk | tuple[int, int, int] | int,
     *,
     render: RenderFn | None = None,
-    _store: _Store | None = None,
 ) -> bool:
     """Render one chunk and write it, unless it is already complete (idempotent).
 
@@ -550,7 +549,11 @@ def write_chunk(
         For a path without a pprender database, a chunk out of range, or a render whose
         profile does not fit the store (shape, bin grid, range window).
     """
-    st = _store if _store is not None else _Store(path)
+    return _write_chunk(_Store(path), chunk, render)
+
+
+def _write_chunk(st: _Store, chunk: Chunk | tuple[int, int, int] | int, render: RenderFn | None) -> bool:
+    """:func:`write_chunk` into an open store (the builders reuse theirs)."""
     c = st.chunk(chunk)
     if c.done:
         return False
@@ -938,7 +941,7 @@ def build_database(
     bar = _progress(progress, total=len(chunks), initial=len(chunks) - len(pending), desc=Path(path).name)
     try:
         for c in pending:
-            write_chunk(path, c, render=render, _store=st)
+            _write_chunk(st, c, render)
             bar.update(1)
     finally:
         bar.close()

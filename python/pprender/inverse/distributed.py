@@ -76,9 +76,9 @@ from .database import (
     _create,
     _progress,
     _Store,
+    _write_chunk,
     list_chunks,
     open_database,
-    write_chunk,
 )
 from ..lidar import Lidar
 
@@ -242,7 +242,7 @@ def _write_chunk_task(path: str, index: int, render: RenderFn | None) -> ChunkRe
     if not c.done:
         st.scene(c.shape, c.material)  # materials are built here (cached per process)
     t1 = time.perf_counter()
-    written = write_chunk(path, c, render=render, _store=st)
+    written = _write_chunk(st, c, render)
     t2, c2 = time.perf_counter(), time.process_time()
     return ChunkReport(
         index=int(index),
