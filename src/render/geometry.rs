@@ -1,6 +1,7 @@
 //! Meshes and attitudes for the renderer (conventions in [`crate::render`]).
 
 use crate::error::{Error, Result};
+use crate::optics::frames::V3;
 
 /// A triangle mesh in the body frame with a material index per face.
 #[derive(Debug, Clone)]
@@ -62,8 +63,8 @@ pub fn is_closed_outward(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> bool {
     }
     let mut volume: HashMap<u32, f64> = HashMap::new();
     for f in faces {
-        let [a, b, c] = f.map(|k| vertices[k as usize]);
-        let v = crate::optics::frames::dot(a, crate::optics::frames::cross(b, c));
+        let [a, b, c] = f.map(|k| V3::from(vertices[k as usize]));
+        let v = a.dot(b.cross(c));
         *volume.entry(find(&mut parent, f[0])).or_insert(0.0) += v / 6.0;
     }
     volume.values().all(|&v| v > 0.0)
@@ -155,11 +156,8 @@ impl Mesh {
         }
         let r2 = radius * radius;
         for (i, f) in faces.iter().enumerate() {
-            let [a, b, c] = f.map(|k| vertices[k as usize]);
-            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let n = crate::optics::frames::cross(e1, e2);
-            let area2 = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let [a, b, c] = f.map(|k| V3::from(vertices[k as usize]));
+            let area2 = (b - a).cross(c - a).length();
             if !(area2 > 2.0 * MIN_RELATIVE_AREA * r2) {
                 return Err(Error::param(
                     "faces",
@@ -227,22 +225,19 @@ impl Mesh {
     /// [`crate::render::cpu::sampled_parts`]): a finely tessellated panel costs what one
     /// large face does.
     pub fn surfaces(&self) -> &[u32] {
-        use crate::optics::frames::{cross, dot, norm};
         self.surfaces.get_or_init(|| {
             let n_f = self.faces.len();
             let mut surf: Vec<u32> = (0..n_f as u32).collect();
             if self.normals.is_some() {
                 return surf;
             }
-            let normal = |t: usize| -> Option<[f64; 3]> {
-                let p = self.faces[t].map(|k| self.vertices[k as usize]);
-                let e1 = [0, 1, 2].map(|d| p[1][d] - p[0][d]);
-                let e2 = [0, 1, 2].map(|d| p[2][d] - p[0][d]);
-                let c = cross(e1, e2);
-                let l = norm(c);
-                (l > 0.0 && l.is_finite()).then(|| c.map(|x| x / l))
+            let normal = |t: usize| -> Option<V3> {
+                let p = self.faces[t].map(|k| V3::from(self.vertices[k as usize]));
+                let c = (p[1] - p[0]).cross(p[2] - p[0]);
+                let l = c.length();
+                (l > 0.0 && l.is_finite()).then(|| c / l)
             };
-            let normals: Vec<Option<[f64; 3]>> = (0..n_f).map(normal).collect();
+            let normals: Vec<Option<V3>> = (0..n_f).map(normal).collect();
             let adj = self.adjacency();
             let mut seen = vec![false; n_f];
             let mut stack = Vec::new();
@@ -264,7 +259,7 @@ impl Mesh {
                         let Some(n) = normals[u] else {
                             continue;
                         };
-                        if dot(n, n0) > 0.0 && norm(cross(n, n0)) <= SURFACE_ANGLE {
+                        if n.dot(n0) > 0.0 && n.cross(n0).length() <= SURFACE_ANGLE {
                             seen[u] = true;
                             surf[u] = root as u32;
                             stack.push(u);
@@ -373,14 +368,14 @@ pub fn check_rotations(r: &[Rot]) -> Result<()> {
     Ok(())
 }
 
-/// `R v`.
+/// `R v` (each component the dot product of a row of `R` with `v`, summed left to right).
 #[inline]
-pub fn rotate(r: &Rot, v: [f64; 3]) -> [f64; 3] {
-    [
-        r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2],
-        r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2],
-        r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2],
-    ]
+pub fn rotate(r: &Rot, v: V3) -> V3 {
+    V3::new(
+        r[0][0] * v.x + r[0][1] * v.y + r[0][2] * v.z,
+        r[1][0] * v.x + r[1][1] * v.y + r[1][2] * v.z,
+        r[2][0] * v.x + r[2][1] * v.y + r[2][2] * v.z,
+    )
 }
 
 /// The transmitter's view of attitude `r` for the bistatic angle `beta`:
@@ -415,7 +410,7 @@ mod tests {
         // 90 degrees about z: x -> y
         let h = (0.5f64).sqrt();
         let r = rotations_from_quaternions(&[[h, 0.0, 0.0, h]]).unwrap();
-        let v = rotate(&r[0], [1.0, 0.0, 0.0]);
+        let v = rotate(&r[0], V3::X);
         assert!((v[0]).abs() < 1e-15 && (v[1] - 1.0).abs() < 1e-15);
         check_rotations(&r).unwrap();
         assert!(rotations_from_quaternions(&[[1.0, 0.1, 0.0, 0.0]]).is_err());
@@ -432,7 +427,7 @@ mod tests {
         // a body vector that R maps to wi goes to +z
         let wi = [beta.sin(), 0.0, beta.cos()];
         let body = [0, 1, 2].map(|k| (0..3).map(|j| r[0][j][k] * wi[j]).sum::<f64>());
-        let v = rotate(&t, body);
+        let v = rotate(&t, V3::from(body));
         assert!(v[0].abs() < 1e-15 && v[1].abs() < 1e-15 && (v[2] - 1.0).abs() < 1e-15);
         assert_eq!(transmitter_rotation(&r[0], 0.0), r[0]);
     }
@@ -517,12 +512,8 @@ mod tests {
         let (v, f) = cube([0.0; 3], 0);
         // the winding is outward: every face normal points away from the centre
         for t in &f {
-            let [a, b, c] = t.map(|k| v[k as usize]);
-            let n = crate::optics::frames::cross(
-                [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
-                [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
-            );
-            assert!(crate::optics::frames::dot(n, a) > 0.0);
+            let [a, b, c] = t.map(|k| V3::from(v[k as usize]));
+            assert!((b - a).cross(c - a).dot(a) > 0.0);
         }
         assert!(is_closed_outward(&v, &f));
         // two bodies, one overlapping the other: still closed
