@@ -15,14 +15,14 @@
 use pprender::brdf::double::eval_double;
 use pprender::brdf::material::{Material, MaterialSpec, Terms};
 use pprender::microfacet::Distribution;
-use pprender::optics::frames::Frame;
+use pprender::optics::frames::{Frame, V3};
 use pprender::optics::fresnel::Eta;
 use rayon::prelude::*;
 use std::time::Instant;
 
-fn dir(theta_deg: f64, phi_deg: f64) -> [f64; 3] {
+fn dir(theta_deg: f64, phi_deg: f64) -> V3 {
     let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
-    [t.sin() * p.cos(), t.sin() * p.sin(), t.cos()]
+    V3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
 }
 
 fn material(name: &str) -> Material {
@@ -57,7 +57,7 @@ fn main() {
         "all" => vec!["beckmann", "blinn", "ggx"],
         m => vec![m],
     };
-    let pairs: Vec<([f64; 3], [f64; 3], String)> = match args.get(2).map(|s| s.as_str()) {
+    let pairs: Vec<(V3, V3, String)> = match args.get(2).map(|s| s.as_str()) {
         None | Some("-") => {
             let mut v = vec![];
             for &(ti, to, dphi) in &[
@@ -83,7 +83,7 @@ fn main() {
                 let t: Vec<&str> = l.split_whitespace().collect();
                 let x: Vec<f64> = t[..6].iter().map(|s| s.parse().unwrap()).collect();
                 let label = t.get(6..).map(|s| s.join(" ")).unwrap_or_default();
-                ([x[0], x[1], x[2]], [x[3], x[4], x[5]], label)
+                (V3::new(x[0], x[1], x[2]), V3::new(x[3], x[4], x[5]), label)
             })
             .collect(),
     };

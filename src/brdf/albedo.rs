@@ -25,7 +25,7 @@
 
 use super::single::masking_over_cosines;
 use super::surface::Surface;
-use crate::optics::frames::reflect;
+use crate::optics::frames::{reflect, V3};
 use crate::optics::fresnel::{reflectance, Eta};
 use std::f64::consts::{FRAC_PI_4, PI};
 
@@ -37,7 +37,7 @@ pub fn single_albedo(mat: &Surface, cos_i: f64, fresnel: bool, n: usize) -> f64 
         return 0.0;
     }
     let si = ((1.0 - ci) * (1.0 + ci)).sqrt();
-    let wi = [si, 0.0, ci];
+    let wi = V3::new(si, 0.0, ci);
     let dist = mat.spec.distribution;
     let rule = crate::quad::gauss_legendre(n);
     // cos of the facet incidence at the (pseudo-)critical angle, if there is one
@@ -121,7 +121,7 @@ pub fn single_albedo(mat: &Surface, cos_i: f64, fresnel: bool, n: usize) -> f64 
                     continue;
                 }
                 let sh = s2h.sqrt();
-                let h = [sh * cp, sh * sp, ch];
+                let h = V3::new(sh * cp, sh * sp, ch);
                 let wi_h = si * h[0] + ci * h[2];
                 if wi_h <= 0.0 {
                     continue;
@@ -151,6 +151,7 @@ pub fn single_albedo(mat: &Surface, cos_i: f64, fresnel: bool, n: usize) -> f64 
 mod tests {
     use crate::brdf::{albedo, Material, MaterialSpec, Terms};
     use crate::microfacet::{Distribution, Shadowing};
+    use crate::optics::frames::V3;
     use crate::optics::fresnel::Eta;
 
     fn furnace(distribution: Distribution, shadowing: Shadowing) -> Material {
@@ -198,8 +199,8 @@ mod tests {
     #[test]
     fn reciprocity_of_the_scalar_part() {
         let mat = furnace(Distribution::Beckmann { alpha: 0.4 }, Shadowing::Aps);
-        let wi = crate::optics::frames::normalize([0.3, -0.2, 0.7]);
-        let wo = crate::optics::frames::normalize([-0.6, 0.1, 0.3]);
+        let wi = crate::optics::frames::normalize(V3::new(0.3, -0.2, 0.7));
+        let wo = crate::optics::frames::normalize(V3::new(-0.6, 0.1, 0.3));
         let f = crate::optics::frames::Frame::Sp;
         let a = crate::brdf::eval(&mat, wi, wo, f);
         let b = crate::brdf::eval(&mat, wo, wi, f);

@@ -86,7 +86,7 @@ pub fn double_jones(
         return None;
     }
     let d = reflect(wi, h1, wi_h1);
-    let hs = [wo[0] - d[0], wo[1] - d[1], wo[2] - d[2]];
+    let hs = wo - d;
     let l2 = dot(hs, hs);
     if l2 <= 1e-300 {
         return None;
@@ -415,7 +415,7 @@ fn integrate_h(
                 let sh = s2h.sqrt();
                 // D d omega = 2 w dw dphi / (2 pi cos)
                 let weight = ww * span * 2.0 * w / (2.0 * PI * ch) * dphi;
-                f([sh * cp, sh * sp, ch], weight);
+                f(V3::new(sh * cp, sh * sp, ch), weight);
             }
         }
     }
@@ -445,9 +445,9 @@ fn double_marks(wi: V3, wo: V3, phi0: f64, correlated: bool) -> Vec<Mark> {
     let graded = |eps: f64| if eps < 0.25 { eps } else { 0.0 };
     let mut eps0 = (c_i / s_i.max(1e-300)).min(c_o / s_o.max(1e-300));
     if correlated {
-        let sep = [wi[0] - wo[0], wi[1] - wo[1], wi[2] - wo[2]];
+        let sep = wi - wo;
         let half_angle = (0.5 * dot(sep, sep).sqrt()).min(1.0).asin();
-        let hs = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+        let hs = normalize(wi + wo);
         let s_h = (hs[0] * hs[0] + hs[1] * hs[1]).sqrt();
         let eps_bs = half_angle / s_h.max(1e-300);
         if eps_bs > 1e-3 {
@@ -530,7 +530,7 @@ pub fn eval_double(mat: &Surface, wi: V3, wo: V3, frame: Frame, order: usize, cb
     let f = [-1.0, 1.0];
     // The singular point h1 = normalize(wi + wo) (d = wo): its polar angle is a breakpoint
     // for every phi (lines passing near it are resolved from both sides).
-    let hs_full = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+    let hs_full = normalize(wi + wo);
     let theta_s = hs_full[2].clamp(-1.0, 1.0).acos();
     let breaks = |cp: f64, sp: f64, out: &mut Vec<f64>| {
         push_breaks(wi, cp, sp, &[0.0, wo[2]], out);

@@ -5,6 +5,7 @@ pub use super::spec::{MaterialSpec, Term, Terms};
 pub use super::surface::Surface;
 use crate::microfacet::masking::ZTable;
 use crate::microfacet::{Distribution, MaskingEval, Shadowing};
+use crate::optics::frames::V3;
 use crate::optics::fresnel::{average_reflectance, Eta};
 use crate::{Error, Result};
 
@@ -306,7 +307,7 @@ impl Material {
             let c = theta.cos();
             let mut v = super::albedo::single_albedo(self, c, fresnel, ALBEDO_ORDER);
             if let Some(st) = s_table {
-                let wi = [theta.sin(), 0.0, c];
+                let wi = V3::new(theta.sin(), 0.0, c);
                 v += super::double::double_albedo(self, wi, fresnel, DOUBLE_TABLE_ORDER, &|u| {
                     eval_escape(st, u)
                 });
@@ -340,7 +341,7 @@ impl Material {
         let up = ZTable::build(scale, S_NODES, |th| {
             super::double::escape_after_bounce(
                 self,
-                [th.sin(), 0.0, th.cos()],
+                V3::new(th.sin(), 0.0, th.cos()),
                 fresnel,
                 DOUBLE_TABLE_ORDER,
             )
@@ -348,7 +349,7 @@ impl Material {
         let down = ZTable::build(scale, S_NODES, |th| {
             super::double::escape_after_bounce(
                 self,
-                [th.sin(), 0.0, -th.cos()],
+                V3::new(th.sin(), 0.0, -th.cos()),
                 fresnel,
                 DOUBLE_TABLE_ORDER,
             )
@@ -358,7 +359,7 @@ impl Material {
 
     /// Double-bounce albedo for unpolarized light at `wi`, with the unpolarized Fresnel
     /// product (see [`super::double::double_albedo`]), by an `n x n` quadrature over `h1`.
-    pub fn double_albedo(&self, wi: [f64; 3], n: usize) -> f64 {
+    pub fn double_albedo(&self, wi: V3, n: usize) -> f64 {
         match &self.s_fresnel {
             Some(st) => super::double::double_albedo(self, wi, true, n, &|u| eval_escape(st, u)),
             None => 0.0,
@@ -437,7 +438,7 @@ impl Material {
 
 /// `S(v)` from its (up, down) tables.
 #[inline]
-fn eval_escape(t: &(ZTable, ZTable), v: [f64; 3]) -> f64 {
+fn eval_escape(t: &(ZTable, ZTable), v: V3) -> f64 {
     let s = (v[0] * v[0] + v[1] * v[1]).sqrt();
     let table = if v[2] >= 0.0 { &t.0 } else { &t.1 };
     table.eval(v[2].abs(), s).max(0.0)

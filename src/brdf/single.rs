@@ -122,7 +122,7 @@ pub(crate) fn single_mueller(
     g: f64,
     bases: (V3, V3, V3, V3),
 ) -> Mat4 {
-    let h = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+    let h = normalize(wi + wo);
     let d = dist.d(h[2], h[0] * h[0] + h[1] * h[1]);
     if d.is_nan() || d <= 0.0 {
         return [[0.0; 4]; 4];
@@ -158,8 +158,8 @@ pub(crate) fn single_term(
 /// mirror direction `wo = (-wi.x, -wi.y, wi.z)`: the `m -> inf` limit of the single term,
 /// and what Mitsuba's smooth `conductor` returns as its sample weight.
 pub fn specular(mat: &Surface, wi: V3, frame: Frame) -> Mat4 {
-    let wo = [-wi[0], -wi[1], wi[2]];
-    let h = [0.0, 0.0, 1.0];
+    let wo = V3::new(-wi[0], -wi[1], wi[2]);
+    let h = V3::Z;
     let (rs, rp) = fresnel_amplitudes(wi[2].clamp(0.0, 1.0), mat.spec.eta);
     let bases = beam_bases(frame, wi, wo);
     jones_to_mueller(&facet_jones(wi, wo, h, rs, rp, bases))

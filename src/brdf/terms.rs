@@ -51,7 +51,7 @@ pub fn sum_terms(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
 fn term_albedo(mat: &Material, term: Term, ci: f64, si: f64, n: usize) -> f64 {
     match term {
         Term::Single => single_albedo(mat, ci, true, n),
-        Term::Double => mat.double_albedo([si, 0.0, ci], n.min(128)),
+        Term::Double => mat.double_albedo(V3::new(si, 0.0, ci), n.min(128)),
         Term::Multiple => mat.depolarizing_albedo(ci, si).0,
         Term::Diffuse => mat.depolarizing_albedo(ci, si).1,
     }

@@ -1,40 +1,39 @@
 //! Stokes reference frames of the incident and reflected beams (see [`crate::optics`]).
 
-/// A 3-vector.
-pub type V3 = [f64; 3];
+/// A 3-vector: glam's `DVec3` (x, y, z).
+///
+/// The helpers below are glam's own operations (same arithmetic, in the same order, as the
+/// hand-written array versions they replaced), except [`normalize`], which divides by the
+/// length as before (glam's `normalize` multiplies by the reciprocal: different last bits).
+pub type V3 = glam::DVec3;
 
 #[inline]
 pub fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    a.dot(b)
 }
 #[inline]
 pub fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    a.cross(b)
 }
 #[inline]
 pub fn neg(a: V3) -> V3 {
-    [-a[0], -a[1], -a[2]]
+    -a
 }
 #[inline]
 pub fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
+    a.length()
 }
+/// `a / |a|` (a division, not glam's multiplication by `1 / |a|`).
 #[inline]
 pub fn normalize(a: V3) -> V3 {
-    let l = norm(a);
-    [a[0] / l, a[1] / l, a[2] / l]
+    a / a.length()
 }
 
 /// Mirror reflection of the direction `v` (pointing away from the surface) about the unit
 /// normal `h`, given `v.h`: `2 (v.h) h - v`.
 #[inline]
 pub fn reflect(v: V3, h: V3, v_dot_h: f64) -> V3 {
-    let t = 2.0 * v_dot_h;
-    [t * h[0] - v[0], t * h[1] - v[1], t * h[2] - v[2]]
+    2.0 * v_dot_h * h - v
 }
 
 /// Which transverse bases the returned Mueller matrices refer to.
@@ -67,7 +66,7 @@ pub fn mitsuba_basis(k: V3) -> V3 {
     let sign = 1.0f64.copysign(k[2]);
     let a = -1.0 / (sign + k[2]);
     let b = k[0] * k[1] * a;
-    [(1.0 + sign * k[0] * k[0] * a), sign * b, -sign * k[0]]
+    V3::new(1.0 + sign * k[0] * k[0] * a, sign * b, -sign * k[0])
 }
 
 /// Squared horizontal length below which a direction counts as "along n" for the
@@ -101,7 +100,7 @@ pub fn beam_bases(frame: Frame, wi: V3, wo: V3) -> (V3, V3, V3, V3) {
                 (ci, si)
             };
             // x_in = normalize(k_in x n) = e_phi(phi_i); x_out = normalize(k_out x n) = -e_phi(phi_o).
-            ([-si, ci, 0.0], [so, -co, 0.0])
+            (V3::new(-si, ci, 0.0), V3::new(so, -co, 0.0))
         }
     };
     (x_in, cross(k_in, x_in), x_out, cross(k_out, x_out))
@@ -137,9 +136,9 @@ mod tests {
     fn bases_are_orthonormal_and_right_handed() {
         for frame in [Frame::Sp, Frame::Mitsuba] {
             for (wi, wo) in [
-                ([0.3, 0.4, 0.866], [-0.5, 0.1, 0.86]),
-                ([0.0, 0.0, 1.0], [0.6, 0.0, 0.8]),
-                ([0.0, 0.0, 1.0], [0.0, 0.0, 1.0]),
+                (V3::new(0.3, 0.4, 0.866), V3::new(-0.5, 0.1, 0.86)),
+                (V3::Z, V3::new(0.6, 0.0, 0.8)),
+                (V3::Z, V3::Z),
             ] {
                 let (wi, wo) = (normalize(wi), normalize(wo));
                 let (xi, yi, xo, yo) = beam_bases(frame, wi, wo);
@@ -159,8 +158,8 @@ mod tests {
 
     #[test]
     fn sp_bases_coincide_for_specular_reflection() {
-        let wi = normalize([0.3, -0.4, 0.5]);
-        let wo = [-wi[0], -wi[1], wi[2]];
+        let wi = normalize(V3::new(0.3, -0.4, 0.5));
+        let wo = V3::new(-wi.x, -wi.y, wi.z);
         let (xi, _, xo, _) = beam_bases(Frame::Sp, wi, wo);
         for a in 0..3 {
             assert!((xi[a] - xo[a]).abs() < 1e-15);

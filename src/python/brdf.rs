@@ -368,7 +368,7 @@ fn direction(v: [f64; 3], name: &'static str, i: usize) -> crate::Result<V3> {
             reason: format!("element {i} = {v:?} is below the horizon (z < 0); directions point away from the surface, z >= 0"),
         });
     }
-    Ok([v[0] / l, v[1] / l, v[2] / l])
+    Ok(V3::from_array(v) / l)
 }
 
 #[pyfunction]
@@ -491,13 +491,10 @@ fn double_jones(
     let wi = direction(wi, "wi", 0)?;
     let wo = direction(wo, "wo", 0)?;
     let h1 = direction(h1, "h1", 0)?;
-    Ok(crate::brdf::double::double_jones(
-        &material.inner,
-        wi,
-        wo,
-        h1,
-        frame,
-    ))
+    Ok(
+        crate::brdf::double::double_jones(&material.inner, wi, wo, h1, frame)
+            .map(|(j, d, h2)| (j, d.to_array(), h2.to_array())),
+    )
 }
 
 /// Monostatic table: (theta nodes, Mueller values (n+1, 4, 4), build seconds, max
@@ -769,7 +766,12 @@ fn brdf_table(
 #[pyfunction]
 fn cbe_gamma(material: &PyMaterial, wi: [f64; 3], wo: [f64; 3]) -> f64 {
     let s = &material.inner.spec;
-    crate::brdf::double::cbe_gamma(s.wavelength, s.correlation_length, wi, wo)
+    crate::brdf::double::cbe_gamma(
+        s.wavelength,
+        s.correlation_length,
+        V3::from_array(wi),
+        V3::from_array(wo),
+    )
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

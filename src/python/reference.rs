@@ -37,7 +37,9 @@ fn vec3(a: &[f64], name: &'static str) -> crate::Result<Vec<V3>> {
     if !a.len().is_multiple_of(3) {
         return Err(Error::Shape(format!("{name} must have shape (..., 3)")));
     }
-    Ok(a.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    Ok(a.chunks_exact(3)
+        .map(|c| V3::new(c[0], c[1], c[2]))
+        .collect())
 }
 
 fn mats(v: &[[[f64; 4]; 4]]) -> Vec<f64> {
@@ -109,7 +111,7 @@ fn reference_microsurface<'py>(
         }
     };
     let cfg = Config {
-        wi: [wi[0], wi[1], wi[2]],
+        wi: V3::new(wi[0], wi[1], wi[2]),
         wo,
         eta: parse_eta(eta)?,
         surface,

@@ -5,7 +5,9 @@ use super::brdf::PyMaterial;
 use crate::brdf::table::{BrdfTableOptions, PartOptions};
 use crate::brdf::Material;
 use crate::render::api::{Outputs, SensorSetup};
-use crate::render::geometry::{check_rotations, rotations_from_quaternions, Mesh, Rot};
+use crate::render::geometry::{
+    check_rotations, rot_from_rows, rot_to_rows, rotations_from_quaternions, Mesh, Rot,
+};
 use crate::render::gpu::{self, DeviceChoice};
 use crate::render::pulse::SampledPulse;
 use crate::render::request::{self, Backend};
@@ -408,11 +410,11 @@ fn attitudes(a: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<Rot>> {
         [_, 3, 3] => v
             .outer_iter()
             .map(|m| {
-                [
+                rot_from_rows([
                     [m[[0, 0]], m[[0, 1]], m[[0, 2]]],
                     [m[[1, 0]], m[[1, 1]], m[[1, 2]]],
                     [m[[2, 0]], m[[2, 1]], m[[2, 2]]],
-                ]
+                ])
             })
             .collect(),
         shape => {
@@ -447,7 +449,10 @@ fn quaternions_to_rotations<'py>(
         .map(|r| [r[0], r[1], r[2], r[3]])
         .collect();
     let r = rotations_from_quaternions(&qs)?;
-    let flat: Vec<f64> = r.iter().flat_map(|m| m.iter().flatten().copied()).collect();
+    let flat: Vec<f64> = r
+        .iter()
+        .flat_map(|m| rot_to_rows(m).into_iter().flatten())
+        .collect();
     Ok(Array3::from_shape_vec((r.len(), 3, 3), flat)
         .expect("shape")
         .into_pyarray(py))

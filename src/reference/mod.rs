@@ -186,11 +186,11 @@ impl Detector {
         let c = dot(self.wo, k);
         let wx = cross(w, self.x_out);
         let wwx = cross(w, wx);
-        let mut x: V3 = std::array::from_fn(|i| self.x_out[i] + wx[i] + wwx[i] / (1.0 + c));
+        let mut x = self.x_out + wx + wwx / (1.0 + c);
         let xk = dot(x, k);
-        x.iter_mut().zip(k).for_each(|(xi, ki)| *xi -= xk * ki);
+        x -= xk * k;
         let l = dot(x, x).sqrt();
-        x.iter_mut().for_each(|xi| *xi /= l);
+        x /= l;
         let y = cross(k, x);
         let proj = |u: V3, f: &[C64; 3]| f[0] * u[0] + f[1] * u[1] + f[2] * u[2];
         jones_to_mueller(&[[proj(x, &px), proj(x, &py)], [proj(y, &px), proj(y, &py)]])
@@ -199,20 +199,20 @@ impl Detector {
 
 /// Validate a direction (unit within 1e-6, finite).
 fn unit(v: V3, name: &'static str) -> Result<V3> {
-    if !v.iter().all(|x| x.is_finite()) {
+    if !v.is_finite() {
         return Err(Error::InvalidDirection {
             name,
-            reason: format!("{v:?} is not finite"),
+            reason: format!("{:?} is not finite", v.to_array()),
         });
     }
     let l = dot(v, v).sqrt();
     if (l - 1.0).abs() > 1e-6 {
         return Err(Error::InvalidDirection {
             name,
-            reason: format!("{v:?} has length {l}; must be a unit vector"),
+            reason: format!("{:?} has length {l}; must be a unit vector", v.to_array()),
         });
     }
-    Ok([v[0] / l, v[1] / l, v[2] / l])
+    Ok(v / l)
 }
 
 /// Check every parameter, naming the offending one.
@@ -221,7 +221,10 @@ fn validate(cfg: &Config) -> Result<()> {
     if wi[2] <= 1e-6 {
         return Err(Error::InvalidDirection {
             name: "wi",
-            reason: format!("{:?} must be above the horizon (z > 1e-6)", cfg.wi),
+            reason: format!(
+                "{:?} must be above the horizon (z > 1e-6)",
+                cfg.wi.to_array()
+            ),
         });
     }
     if !(cfg.cone.is_finite() && cfg.cone > 0.0 && cfg.cone <= std::f64::consts::FRAC_PI_4) {
@@ -240,7 +243,8 @@ fn validate(cfg: &Config) -> Result<()> {
             return Err(Error::InvalidDirection {
                 name: "wo",
                 reason: format!(
-                    "element {i} = {w:?}: the detector cone of half-angle {} reaches the horizon (need z > sin(cone) = {})",
+                    "element {i} = {:?}: the detector cone of half-angle {} reaches the horizon (need z > sin(cone) = {})",
+                    w.to_array(),
                     cfg.cone,
                     cfg.cone.sin()
                 ),
@@ -359,7 +363,7 @@ pub fn run(cfg: &Config) -> Result<Output> {
         .iter()
         .map(|w| std::f64::consts::PI * cfg.cone.sin().powi(2) * w[2])
         .collect();
-    let e0: Fields = [e1, e2].map(|v| v.map(|x| C64::new(x, 0.0)));
+    let e0: Fields = [e1, e2].map(|v| v.to_array().map(|x| C64::new(x, 0.0)));
 
     let nb = cfg.batches as u64;
     let mut batch_tallies = Vec::with_capacity(cfg.batches as usize);
@@ -382,7 +386,7 @@ pub fn run(cfg: &Config) -> Result<Output> {
                 let mut t = Tally::new(nk);
                 let count = CHUNK.min(rays_b - c * CHUNK);
                 for _ in 0..count {
-                    let start = [rng.uniform() * period, rng.uniform() * period, z0];
+                    let start = V3::new(rng.uniform() * period, rng.uniform() * period, z0);
                     match trace_ray(&field, cfg.eta, wi, start, e0, cfg.max_order, max_cells) {
                         RayEnd::Escaped { order, k, e } => {
                             let bin = (order.min(3) - 1) as usize;
@@ -479,7 +483,7 @@ mod tests {
 
     fn dir(theta_deg: f64, phi_deg: f64) -> V3 {
         let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
-        [t.sin() * p.cos(), t.sin() * p.sin(), t.cos()]
+        V3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
     }
 
     fn gaussian(alpha: f64) -> Surface {
@@ -508,7 +512,7 @@ mod tests {
     #[test]
     fn nearly_flat_surface_is_the_fresnel_mirror() {
         let wi = dir(40.0, 30.0);
-        let wo = [-wi[0], -wi[1], wi[2]];
+        let wo = V3::new(-wi[0], -wi[1], wi[2]);
         let eta = Eta::new(1.5, 0.3);
         let out = run(&cfg(
             wi,
@@ -595,7 +599,7 @@ mod tests {
     fn results_do_not_depend_on_thread_count() {
         let c = cfg(
             dir(30.0, 0.0),
-            vec![dir(30.0, 0.0), normalize([0.2, 0.1, 0.9])],
+            vec![dir(30.0, 0.0), normalize(V3::new(0.2, 0.1, 0.9))],
             Eta::new(1.2, 1.0),
             gaussian(0.4),
             5000,
@@ -632,7 +636,7 @@ mod tests {
         c.max_order = 0;
         assert!(run(&c).unwrap_err().to_string().contains("max_order"));
         let mut c = base;
-        c.wi = [0.0, 0.0, 2.0];
+        c.wi = V3::new(0.0, 0.0, 2.0);
         assert!(run(&c).unwrap_err().to_string().contains("wi"));
     }
 }

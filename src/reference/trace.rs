@@ -186,18 +186,14 @@ pub type Fields = [[C64; 3]; 2];
 #[inline]
 pub fn reflect(k_in: V3, h: V3, eta: Eta, e: &mut Fields) -> V3 {
     let c = (-dot(k_in, h)).clamp(0.0, 1.0);
-    let mut k_out = [
-        k_in[0] + 2.0 * c * h[0],
-        k_in[1] + 2.0 * c * h[1],
-        k_in[2] + 2.0 * c * h[2],
-    ];
+    let mut k_out = k_in + 2.0 * c * h;
     let l = dot(k_out, k_out).sqrt();
-    k_out.iter_mut().for_each(|x| *x /= l);
+    k_out /= l;
     let sv = cross(k_in, h);
     let l2 = dot(sv, sv);
     let s = if l2 > 1e-30 {
         let l = l2.sqrt();
-        [sv[0] / l, sv[1] / l, sv[2] / l]
+        sv / l
     } else {
         mitsuba_basis(k_in)
     };
@@ -238,7 +234,7 @@ pub fn trace_ray(
     max_cells: usize,
 ) -> RayEnd {
     let mut o = start;
-    let mut d = [-wi[0], -wi[1], -wi[2]];
+    let mut d = -wi;
     let mut order = 0;
     let period = f.n as f64;
     loop {
@@ -255,13 +251,13 @@ pub fn trace_ray(
                     return RayEnd::Truncated { e };
                 }
                 // New origin, wrapped into the tile.
-                o = [
+                o = V3::new(
                     (o[0] + t * d[0]).rem_euclid(period),
                     (o[1] + t * d[1]).rem_euclid(period),
                     o[2] + t * d[2],
-                ];
+                );
                 let l = (plane.sx * plane.sx + plane.sy * plane.sy + 1.0).sqrt();
-                let h = [-plane.sx / l, -plane.sy / l, 1.0 / l];
+                let h = V3::new(-plane.sx / l, -plane.sy / l, 1.0 / l);
                 d = reflect(d, h, eta, &mut e);
                 order += 1;
             }
@@ -285,8 +281,8 @@ mod tests {
     #[test]
     fn reflection_matches_the_convention_in_the_facet_frame() {
         let eta = Eta::new(1.3, 2.1);
-        let k_in = normalize([0.3, -0.2, -0.9]);
-        let h = normalize([0.1, 0.25, 1.0]);
+        let k_in = normalize(V3::new(0.3, -0.2, -0.9));
+        let h = normalize(V3::new(0.1, 0.25, 1.0));
         let s = normalize(cross(k_in, h));
         let p_in = cross(k_in, s);
         let mut e = [real(s), real(p_in)];
@@ -304,9 +300,9 @@ mod tests {
 
     #[test]
     fn perfect_conductor_preserves_field_norm() {
-        let k_in = normalize([0.0, 0.0, -1.0]);
-        for h in [[0.0, 0.0, 1.0], normalize([0.5, -0.3, 1.0])] {
-            let mut e = [real([1.0, 0.0, 0.0]), real([0.0, 1.0, 0.0])];
+        let k_in = normalize(V3::new(0.0, 0.0, -1.0));
+        for h in [V3::Z, normalize(V3::new(0.5, -0.3, 1.0))] {
+            let mut e = [real(V3::X), real(V3::Y)];
             let k = reflect(k_in, h, Eta::PerfectConductor, &mut e);
             for col in &e {
                 let p: f64 = col.iter().map(|c| c.norm_sqr()).sum();
@@ -324,15 +320,20 @@ mod tests {
         let n = 8;
         let h: Vec<f64> = (0..n * n).map(|k| 0.25 * (k / n) as f64).collect();
         let f = HeightField::new(n, h).unwrap();
-        let o = [2.3, 1.7, 10.0];
-        match trace_segment(&f, o, [0.0, 0.0, -1.0], 1000) {
+        let o = V3::new(2.3, 1.7, 10.0);
+        match trace_segment(&f, o, V3::NEG_Z, 1000) {
             Segment::Hit { t, plane } => {
                 assert!((10.0 - t - (0.5 + 0.25 * 0.3)).abs() < 1e-12);
                 assert!((plane.sx - 0.25).abs() < 1e-15 && plane.sy.abs() < 1e-15);
             }
             s => panic!("{s:?}"),
         }
-        match trace_segment(&f, [2.3, 1.7, 10.0], normalize([0.1, 0.2, 1.0]), 1000) {
+        match trace_segment(
+            &f,
+            V3::new(2.3, 1.7, 10.0),
+            normalize(V3::new(0.1, 0.2, 1.0)),
+            1000,
+        ) {
             Segment::Escaped => {}
             s => panic!("{s:?}"),
         }
@@ -352,24 +353,24 @@ mod tests {
                             (i as i64 + ox * n as i64) as f64,
                             (j as i64 + oy * n as i64) as f64,
                         );
-                        let p00 = [x, y, h00];
-                        let p10 = [x + 1.0, y, h10];
-                        let p01 = [x, y + 1.0, h01];
-                        let p11 = [x + 1.0, y + 1.0, h11];
+                        let p00 = V3::new(x, y, h00);
+                        let p10 = V3::new(x + 1.0, y, h10);
+                        let p01 = V3::new(x, y + 1.0, h01);
+                        let p11 = V3::new(x + 1.0, y + 1.0, h11);
                         let tris = if HeightField::main_diagonal(i, j) {
                             [[p00, p10, p11], [p00, p11, p01]]
                         } else {
                             [[p00, p10, p01], [p10, p11, p01]]
                         };
                         for [a, b, c] in tris {
-                            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-                            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+                            let e1 = b - a;
+                            let e2 = c - a;
                             let pv = cross(d, e2);
                             let det = dot(e1, pv);
                             if det.abs() < 1e-14 {
                                 continue;
                             }
-                            let tv = [o[0] - a[0], o[1] - a[1], o[2] - a[2]];
+                            let tv = o - a;
                             let u = dot(tv, pv) / det;
                             let qv = cross(tv, e1);
                             let v = dot(d, qv) / det;
@@ -379,7 +380,7 @@ mod tests {
                             }
                             let mut nrm = normalize(cross(e1, e2));
                             if nrm[2] < 0.0 {
-                                nrm = [-nrm[0], -nrm[1], -nrm[2]];
+                                nrm = -nrm;
                             }
                             if best.is_none_or(|(tb, _)| t < tb) {
                                 best = Some((t, nrm));
@@ -402,31 +403,27 @@ mod tests {
             // Downward rays from above the surface, and rays starting on it going up-ish.
             let theta = rng.uniform() * 1.2;
             let phi = rng.uniform() * std::f64::consts::TAU;
-            let mut d = [
+            let mut d = V3::new(
                 theta.sin() * phi.cos(),
                 theta.sin() * phi.sin(),
                 -theta.cos(),
-            ];
-            let mut o = [rng.uniform() * 16.0, rng.uniform() * 16.0, f.h_max + 0.5];
+            );
+            let mut o = V3::new(rng.uniform() * 16.0, rng.uniform() * 16.0, f.h_max + 0.5);
             if rng.uniform() < 0.5 {
                 // Start at a brute-force surface point and shoot along a reflected direction.
                 let Some((t, h)) = brute_force(&f, o, d) else {
                     continue;
                 };
-                o = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
+                o += t * d;
                 let c = -dot(d, h);
-                d = normalize([
-                    d[0] + 2.0 * c * h[0],
-                    d[1] + 2.0 * c * h[1],
-                    d[2] + 2.0 * c * h[2],
-                ]);
+                d = normalize(d + 2.0 * c * h);
             }
             let want = brute_force(&f, o, d);
             let got = trace_segment(&f, o, d, 100_000);
             match (got, want) {
                 (Segment::Hit { t, plane }, Some((tw, nw))) => {
                     let l = (plane.sx * plane.sx + plane.sy * plane.sy + 1.0).sqrt();
-                    let ng = [-plane.sx / l, -plane.sy / l, 1.0 / l];
+                    let ng = V3::new(-plane.sx / l, -plane.sy / l, 1.0 / l);
                     assert!((t - tw).abs() < 1e-9 * (1.0 + tw), "t {t} vs {tw}");
                     assert!(
                         dot(ng, nw) > 1.0 - 1e-9 || (t - tw).abs() < 1e-9,

@@ -7,11 +7,11 @@
 use crate::brdf::table::{BrdfTable, BrdfTableOptions, PartKind, TableFrame};
 use crate::brdf::{Material, MaterialSpec, Terms};
 use crate::microfacet::Distribution;
-use crate::optics::frames::Frame;
+use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::{Eta, C64};
 use crate::render::api::{Layout, Outputs, Rendered};
 use crate::render::cpu;
-use crate::render::geometry::{Mesh, Rot};
+use crate::render::geometry::{rot_from_rows, Mesh, Rot};
 use crate::render::gpu::{context, render, DeviceChoice, Gpu, GpuTables, PartRef};
 use crate::render::test_scenes::{
     lambert_brdf, lambert_sensor, lambert_tables, metal, sphere_and_plate, two_attitudes, uv_sphere,
@@ -30,7 +30,7 @@ fn lambertian_sphere_on_the_device_matches_twin_and_analytic() {
     let mesh = uv_sphere(a, 64, 128);
     let tables = lambert_tables(rho, 0.0);
     let sensor = lambert_sensor(128);
-    let rot = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
+    let rot = vec![Rot::IDENTITY];
     let out = Outputs {
         image: true,
         range: true,
@@ -109,7 +109,7 @@ fn kernel_twin_core(
     sensor.bistatic_angle = beta;
     let g = render(gpu, mesh, &tables, &sensor, rot, out).unwrap();
     let by_table = cpu::Tables(std::slice::from_ref(table));
-    let by_core = |_m: usize, wi: [f64; 3], wo: [f64; 3]| crate::brdf::eval(mat, wi, wo, Frame::Sp);
+    let by_core = |_m: usize, wi: V3, wo: V3| crate::brdf::eval(mat, wi, wo, Frame::Sp);
     let t = cpu::render_cpu(mesh, &sensor, rot, out, &by_table);
     let c = cpu::render_cpu(mesh, &sensor, rot, out, &by_core);
     (g, t, c)
@@ -524,7 +524,7 @@ fn samples_kernel_matches_twin() {
     let plate = Mesh::new(v, vec![[0, 1, 2], [0, 2, 3]], None, vec![0; 2], 1).unwrap();
     let analytic = 4.0 * rho * (2.0 * h) * (2.0 * h);
     let tables = lambert_tables(rho, 0.0);
-    let rot = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
+    let rot = vec![Rot::IDENTITY];
     let mut errs = vec![];
     for k in [1usize, 4, 16] {
         let mut sensor = lambert_sensor(47);
@@ -666,11 +666,11 @@ fn analytic_coverage_totals_are_exact() {
     let h = 0.5;
     let v = vec![[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]];
     let plate = Mesh::new(v, vec![[0, 1, 2], [0, 2, 3]], None, vec![0; 2], 1).unwrap();
-    let rot = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
+    let rot = vec![Rot::IDENTITY];
     let c = 0.3f64;
     let s = (1.0 - c * c).sqrt();
     // a turn about the view axis, so that no edge lies along the pixel grid
-    let turned = vec![[[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]];
+    let turned = vec![rot_from_rows([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])];
     let analytic = 4.0 * rho * (2.0 * h) * (2.0 * h);
     for res in [47usize, 64, 101] {
         for (r, name) in [(&rot, "aligned"), (&turned, "turned")] {
@@ -700,15 +700,10 @@ fn analytic_coverage_totals_are_exact() {
     for (a, rot) in rots.iter().enumerate() {
         let mut exact = 0.0;
         for f in &flat.faces {
-            let p = f.map(|k| crate::render::geometry::rotate(rot, flat.vertices[k as usize]));
-            let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
-            let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-            let n = [
-                e1[1] * e2[2] - e1[2] * e2[1],
-                e1[2] * e2[0] - e1[0] * e2[2],
-                e1[0] * e2[1] - e1[1] * e2[0],
-            ];
-            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let p = f
+                .map(|k| crate::render::geometry::rotate(rot, V3::from(flat.vertices[k as usize])));
+            let n = (p[1] - p[0]).cross(p[2] - p[0]);
+            let len = n.length();
             if n[2] > 0.0 {
                 // 4 rho A n_z^2, A = len / 2, n_z = n[2] / len
                 exact += 4.0 * rho * 0.5 * len * (n[2] / len).powi(2);

@@ -1,6 +1,8 @@
 //! Meshes and attitudes for the renderer (conventions in [`crate::render`]).
 
 use crate::error::{Error, Result};
+use crate::optics::frames::V3;
+use glam::{DMat3, DQuat};
 
 /// A triangle mesh in the body frame with a material index per face.
 #[derive(Debug, Clone)]
@@ -62,8 +64,8 @@ pub fn is_closed_outward(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> bool {
     }
     let mut volume: HashMap<u32, f64> = HashMap::new();
     for f in faces {
-        let [a, b, c] = f.map(|k| vertices[k as usize]);
-        let v = crate::optics::frames::dot(a, crate::optics::frames::cross(b, c));
+        let [a, b, c] = f.map(|k| V3::from(vertices[k as usize]));
+        let v = a.dot(b.cross(c));
         *volume.entry(find(&mut parent, f[0])).or_insert(0.0) += v / 6.0;
     }
     volume.values().all(|&v| v > 0.0)
@@ -155,11 +157,8 @@ impl Mesh {
         }
         let r2 = radius * radius;
         for (i, f) in faces.iter().enumerate() {
-            let [a, b, c] = f.map(|k| vertices[k as usize]);
-            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let n = crate::optics::frames::cross(e1, e2);
-            let area2 = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let [a, b, c] = f.map(|k| V3::from(vertices[k as usize]));
+            let area2 = (b - a).cross(c - a).length();
             if !(area2 > 2.0 * MIN_RELATIVE_AREA * r2) {
                 return Err(Error::param(
                     "faces",
@@ -227,22 +226,19 @@ impl Mesh {
     /// [`crate::render::cpu::sampled_parts`]): a finely tessellated panel costs what one
     /// large face does.
     pub fn surfaces(&self) -> &[u32] {
-        use crate::optics::frames::{cross, dot, norm};
         self.surfaces.get_or_init(|| {
             let n_f = self.faces.len();
             let mut surf: Vec<u32> = (0..n_f as u32).collect();
             if self.normals.is_some() {
                 return surf;
             }
-            let normal = |t: usize| -> Option<[f64; 3]> {
-                let p = self.faces[t].map(|k| self.vertices[k as usize]);
-                let e1 = [0, 1, 2].map(|d| p[1][d] - p[0][d]);
-                let e2 = [0, 1, 2].map(|d| p[2][d] - p[0][d]);
-                let c = cross(e1, e2);
-                let l = norm(c);
-                (l > 0.0 && l.is_finite()).then(|| c.map(|x| x / l))
+            let normal = |t: usize| -> Option<V3> {
+                let p = self.faces[t].map(|k| V3::from(self.vertices[k as usize]));
+                let c = (p[1] - p[0]).cross(p[2] - p[0]);
+                let l = c.length();
+                (l > 0.0 && l.is_finite()).then(|| c / l)
             };
-            let normals: Vec<Option<[f64; 3]>> = (0..n_f).map(normal).collect();
+            let normals: Vec<Option<V3>> = (0..n_f).map(normal).collect();
             let adj = self.adjacency();
             let mut seen = vec![false; n_f];
             let mut stack = Vec::new();
@@ -264,7 +260,7 @@ impl Mesh {
                         let Some(n) = normals[u] else {
                             continue;
                         };
-                        if dot(n, n0) > 0.0 && norm(cross(n, n0)) <= SURFACE_ANGLE {
+                        if n.dot(n0) > 0.0 && n.cross(n0).length() <= SURFACE_ANGLE {
                             seen[u] = true;
                             surf[u] = root as u32;
                             stack.push(u);
@@ -309,41 +305,79 @@ impl Mesh {
 /// normal in f64.
 pub const SURFACE_ANGLE: f64 = 1e-7;
 
-/// A rotation matrix (row-major, `p_tel = R p_body`).
-pub type Rot = [[f64; 3]; 3];
+/// A rotation matrix, `p_tel = R p_body`: glam's `DMat3`, stored by columns
+/// (`r.col(j)`, `r.x_axis` ..; `r.row(i)` is row `i`). Users give and get matrices by rows
+/// (numpy's `(3, 3)`): [`rot_from_rows`], [`rot_to_rows`].
+pub type Rot = DMat3;
+
+/// The rotation whose row `i` is `rows[i]` (`R[i][j] = rows[i][j]`).
+#[inline]
+pub fn rot_from_rows(rows: [[f64; 3]; 3]) -> Rot {
+    DMat3::from_cols_array_2d(&rows).transpose()
+}
+
+/// The rows of `r` (`rot_to_rows(r)[i][j] = R[i][j]`).
+#[inline]
+pub fn rot_to_rows(r: &Rot) -> [[f64; 3]; 3] {
+    r.transpose().to_cols_array_2d()
+}
+
+/// A user quaternion `(w, x, y, z)` as glam's `DQuat` (stored `(x, y, z, w)`): the one place
+/// where the two orders meet.
+#[inline]
+pub fn quat_from_wxyz(q: [f64; 4]) -> DQuat {
+    let [w, x, y, z] = q;
+    DQuat::from_xyzw(x, y, z, w)
+}
+
+/// `q` as the user's `(w, x, y, z)` (the inverse of [`quat_from_wxyz`]).
+#[inline]
+pub fn quat_to_wxyz(q: DQuat) -> [f64; 4] {
+    [q.w, q.x, q.y, q.z]
+}
+
+/// The rotation matrix of the unit quaternion `q`. The project's formula, not glam's
+/// `DMat3::from_quat` (which forms `x * (y + y)` where this forms `2 (x y)`: equal but for
+/// rounding in the subnormal range).
+#[inline]
+pub fn rot_from_unit_quat(q: DQuat) -> Rot {
+    let DQuat { x, y, z, w } = q;
+    rot_from_rows([
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ])
+}
 
 /// Rotation matrices from `(w, x, y, z)` quaternions (normalized; refused when the norm is
 /// off by more than `1e-6` relative or not finite).
 pub fn rotations_from_quaternions(q: &[[f64; 4]]) -> Result<Vec<Rot>> {
     q.iter()
         .enumerate()
-        .map(|(i, q)| {
-            let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+        .map(|(i, wxyz)| {
+            let q = quat_from_wxyz(*wxyz);
+            // the norm summed in the user's order w, x, y, z; each component divided by it
+            let n = (q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z).sqrt();
             if !n.is_finite() || (n - 1.0).abs() > 1e-6 {
                 return Err(Error::param(
                     "attitudes",
-                    format!("quaternion {i} = {q:?} (norm {n})"),
+                    format!("quaternion {i} = {wxyz:?} (norm {n})"),
                     "unit quaternions (w, x, y, z), |q| = 1 within 1e-6",
                 ));
             }
-            let [w, x, y, z] = q.map(|c| c / n);
-            Ok([
-                [
-                    1.0 - 2.0 * (y * y + z * z),
-                    2.0 * (x * y - w * z),
-                    2.0 * (x * z + w * y),
-                ],
-                [
-                    2.0 * (x * y + w * z),
-                    1.0 - 2.0 * (x * x + z * z),
-                    2.0 * (y * z - w * x),
-                ],
-                [
-                    2.0 * (x * z - w * y),
-                    2.0 * (y * z + w * x),
-                    1.0 - 2.0 * (x * x + y * y),
-                ],
-            ])
+            Ok(rot_from_unit_quat(q / n))
         })
         .collect()
 }
@@ -351,6 +385,7 @@ pub fn rotations_from_quaternions(q: &[[f64; 4]]) -> Result<Vec<Rot>> {
 /// Check rotation matrices: finite, orthonormal within `1e-6`, determinant +1.
 pub fn check_rotations(r: &[Rot]) -> Result<()> {
     for (i, m) in r.iter().enumerate() {
+        let m = rot_to_rows(m);
         let mut worst = 0.0f64;
         for a in 0..3 {
             for b in 0..3 {
@@ -373,14 +408,11 @@ pub fn check_rotations(r: &[Rot]) -> Result<()> {
     Ok(())
 }
 
-/// `R v`.
+/// `R v`: glam's `DMat3 * DVec3`, component `i` summed `(R[i][0] v.x + R[i][1] v.y) +
+/// R[i][2] v.z` as the hand-written row products did.
 #[inline]
-pub fn rotate(r: &Rot, v: [f64; 3]) -> [f64; 3] {
-    [
-        r[0][0] * v[0] + r[0][1] * v[1] + r[0][2] * v[2],
-        r[1][0] * v[0] + r[1][1] * v[1] + r[1][2] * v[2],
-        r[2][0] * v[0] + r[2][1] * v[1] + r[2][2] * v[2],
-    ]
+pub fn rotate(r: &Rot, v: V3) -> V3 {
+    *r * v
 }
 
 /// The transmitter's view of attitude `r` for the bistatic angle `beta`:
@@ -388,11 +420,10 @@ pub fn rotate(r: &Rot, v: [f64; 3]) -> [f64; 3] {
 /// `c R_0 - s R_2`, `R_1`, `s R_0 + c R_2`). The cast-shadow raster draws with it.
 pub fn transmitter_rotation(r: &Rot, beta: f64) -> Rot {
     let (s, c) = beta.sin_cos();
-    [
-        [0, 1, 2].map(|k| c * r[0][k] - s * r[2][k]),
-        r[1],
-        [0, 1, 2].map(|k| s * r[0][k] + c * r[2][k]),
-    ]
+    // by rows, not as the product `R_y(-beta) * R` (whose `0 * R_1` terms can flip the sign
+    // of a zero)
+    let (r0, r1, r2) = (r.row(0), r.row(1), r.row(2));
+    DMat3::from_cols(c * r0 - s * r2, r1, s * r0 + c * r2).transpose()
 }
 
 /// GPU layout of a rotation: WGSL `mat3x3<f32>` (3 columns padded to vec4).
@@ -400,7 +431,7 @@ pub fn gpu_rotation(r: &Rot) -> [f32; 12] {
     let mut out = [0.0f32; 12];
     for col in 0..3 {
         for row in 0..3 {
-            out[4 * col + row] = r[row][col] as f32;
+            out[4 * col + row] = r.col(col)[row] as f32;
         }
     }
     out
@@ -415,11 +446,51 @@ mod tests {
         // 90 degrees about z: x -> y
         let h = (0.5f64).sqrt();
         let r = rotations_from_quaternions(&[[h, 0.0, 0.0, h]]).unwrap();
-        let v = rotate(&r[0], [1.0, 0.0, 0.0]);
+        let v = rotate(&r[0], V3::X);
         assert!((v[0]).abs() < 1e-15 && (v[1] - 1.0).abs() < 1e-15);
         check_rotations(&r).unwrap();
         assert!(rotations_from_quaternions(&[[1.0, 0.1, 0.0, 0.0]]).is_err());
         assert!(rotations_from_quaternions(&[[f64::NAN, 0.0, 0.0, 0.0]]).is_err());
+    }
+
+    #[test]
+    fn wxyz_quaternions_convert_in_one_place_and_round_trip() {
+        // 90 degrees about z, given as (w, x, y, z) = (cos 45, 0, 0, sin 45): x -> y, y -> -x
+        let h = 0.5f64.sqrt();
+        let q = quat_from_wxyz([h, 0.0, 0.0, h]);
+        assert_eq!((q.x, q.y, q.z, q.w), (0.0, 0.0, h, h));
+        let want = DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
+        assert!((q.dot(want) - 1.0).abs() < 1e-15);
+        let r = rotations_from_quaternions(&[[h, 0.0, 0.0, h]]).unwrap()[0];
+        let rows = rot_to_rows(&r);
+        let expect = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((rows[i][j] - expect[i][j]).abs() < 1e-15, "{rows:?}");
+            }
+        }
+        assert!((rotate(&r, V3::Y) - V3::NEG_X).length() < 1e-15);
+        // a generic attitude: (w, x, y, z) round-trips exactly, the matrix agrees with
+        // glam's own conversion, and glam's inverse gives the quaternion back (up to sign)
+        let n = (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt();
+        let wxyz = [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / n);
+        let q = quat_from_wxyz(wxyz);
+        assert_eq!(quat_to_wxyz(q), wxyz);
+        assert_eq!((q.w, q.x, q.y, q.z), (wxyz[0], wxyz[1], wxyz[2], wxyz[3]));
+        let r = rotations_from_quaternions(&[wxyz]).unwrap()[0];
+        assert!(r.abs_diff_eq(DMat3::from_quat(q), 1e-15));
+        let back = DQuat::from_mat3(&r);
+        let s = back.dot(q).signum();
+        let back = quat_to_wxyz(back * s);
+        for k in 0..4 {
+            assert!((back[k] - wxyz[k]).abs() < 1e-14, "{back:?} vs {wxyz:?}");
+        }
+        // rows in, rows out
+        let m = [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]];
+        let a = rot_from_rows(m);
+        assert_eq!(rot_to_rows(&a), m);
+        assert_eq!(a.row(1), V3::new(4.0, 5.0, 6.0));
+        assert_eq!(a.col(0), V3::new(1.0, 4.0, 7.0));
     }
 
     #[test]
@@ -431,7 +502,7 @@ mod tests {
         check_rotations(&[t]).unwrap();
         // a body vector that R maps to wi goes to +z
         let wi = [beta.sin(), 0.0, beta.cos()];
-        let body = [0, 1, 2].map(|k| (0..3).map(|j| r[0][j][k] * wi[j]).sum::<f64>());
+        let body = r[0].transpose() * V3::from(wi);
         let v = rotate(&t, body);
         assert!(v[0].abs() < 1e-15 && v[1].abs() < 1e-15 && (v[2] - 1.0).abs() < 1e-15);
         assert_eq!(transmitter_rotation(&r[0], 0.0), r[0]);
@@ -517,12 +588,8 @@ mod tests {
         let (v, f) = cube([0.0; 3], 0);
         // the winding is outward: every face normal points away from the centre
         for t in &f {
-            let [a, b, c] = t.map(|k| v[k as usize]);
-            let n = crate::optics::frames::cross(
-                [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
-                [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
-            );
-            assert!(crate::optics::frames::dot(n, a) > 0.0);
+            let [a, b, c] = t.map(|k| V3::from(v[k as usize]));
+            assert!((b - a).cross(c - a).dot(a) > 0.0);
         }
         assert!(is_closed_outward(&v, &f));
         // two bodies, one overlapping the other: still closed

@@ -4,6 +4,7 @@
 
 use crate::brdf::{Material, MaterialSpec, Terms};
 use crate::microfacet::Distribution;
+use crate::optics::frames::V3;
 use crate::optics::fresnel::{Eta, C64};
 use crate::render::api::SensorSetup;
 use crate::render::geometry::{Mesh, Rot};
@@ -67,7 +68,7 @@ pub fn lambert_tables(rho: f64, beta: f64) -> GpuTables {
 }
 
 /// The Lambertian BRDF `rho / pi` (M00 alone) for the twin.
-pub fn lambert_brdf(rho: f64) -> impl Fn(usize, [f64; 3], [f64; 3]) -> [[f64; 4]; 4] + Sync {
+pub fn lambert_brdf(rho: f64) -> impl Fn(usize, V3, V3) -> [[f64; 4]; 4] + Sync {
     move |_m, _wi, _wo| {
         let mut m = [[0.0; 4]; 4];
         m[0][0] = rho / std::f64::consts::PI;

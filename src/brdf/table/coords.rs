@@ -22,18 +22,10 @@ pub fn table_dirs(beta: f64, theta: f64, psi: f64) -> (V3, V3) {
     let (st, ct) = theta.sin_cos();
     let (sp, cp) = psi.sin_cos();
     let (sb, cb) = (0.5 * beta).sin_cos();
-    let b = [st, 0.0, ct];
-    let t = [cp * ct, sp, -cp * st];
-    let wi = [
-        cb * b[0] + sb * t[0],
-        cb * b[1] + sb * t[1],
-        cb * b[2] + sb * t[2],
-    ];
-    let wo = [
-        cb * b[0] - sb * t[0],
-        cb * b[1] - sb * t[1],
-        cb * b[2] - sb * t[2],
-    ];
+    let b = V3::new(st, 0.0, ct);
+    let t = V3::new(cp * ct, sp, -cp * st);
+    let wi = cb * b + sb * t;
+    let wo = cb * b - sb * t;
     (wi, wo)
 }
 
@@ -46,7 +38,7 @@ fn bisector_axes(b: V3) -> (V3, V3) {
     } else {
         (1.0, 0.0)
     };
-    ([b[2] * c, b[2] * s, -r], [-s, c, 0.0])
+    (V3::new(b[2] * c, b[2] * s, -r), V3::new(-s, c, 0.0))
 }
 
 /// Table coordinates of local unit directions `wi`, `wo` (`z >= 0`): `(theta, psi,
@@ -55,25 +47,25 @@ fn bisector_axes(b: V3) -> (V3, V3) {
 /// `beta = 0`, `psi = 0` (the matrix does not depend on it). At `theta = 0` the azimuth
 /// of `b` is taken as 0.
 pub fn table_coords(beta: f64, wi: V3, wo: V3) -> (f64, f64, bool) {
-    let b = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+    let b = normalize(wi + wo);
     let r = (b[0] * b[0] + b[1] * b[1]).sqrt();
     let theta = r.atan2(b[2]);
     if beta == 0.0 {
         return (theta, 0.0, false);
     }
     let (et, ep) = bisector_axes(b);
-    let d = [wi[0] - wo[0], wi[1] - wo[1], wi[2] - wo[2]];
+    let d = wi - wo;
     let psi = dot(d, ep).atan2(dot(d, et));
     (theta, psi.abs(), psi < 0.0)
 }
 
 /// Beam bases `(x_in, y_in, x_out, y_out)` of [`TableFrame::Bisector`].
 pub fn bisector_bases(wi: V3, wo: V3) -> (V3, V3, V3, V3) {
-    let b = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+    let b = normalize(wi + wo);
     let (_, e) = bisector_axes(b);
     let proj = |w: V3| {
         let c = dot(e, w);
-        normalize([e[0] - c * w[0], e[1] - c * w[1], e[2] - c * w[2]])
+        normalize(e - c * w)
     };
     let (x_in, x_out) = (proj(wi), proj(wo));
     (x_in, cross(neg(wi), x_in), x_out, cross(wo, x_out))

@@ -14,7 +14,7 @@
 
 use crate::brdf::material::Material;
 use crate::microfacet::masking::ZTable;
-use crate::optics::frames::Frame;
+use crate::optics::frames::{Frame, V3};
 use crate::optics::mueller::Mat4;
 use rayon::prelude::*;
 
@@ -34,7 +34,7 @@ impl MonostaticTable {
             .into_par_iter()
             .map(|i| {
                 let th = ZTable::theta_of_z(scale, i as f64 / nodes as f64);
-                let w = [th.sin(), 0.0, th.cos()];
+                let w = V3::new(th.sin(), 0.0, th.cos());
                 double_only(&m, w)
             })
             .collect();
@@ -85,7 +85,7 @@ impl MonostaticTable {
             .into_par_iter()
             .map(|i| {
                 let th = ZTable::theta_of_z(scale, (i as f64 + 0.5) / n as f64);
-                let w = [th.sin(), 0.0, th.cos()];
+                let w = V3::new(th.sin(), 0.0, th.cos());
                 let want = double_only(mat, w);
                 let total = crate::brdf::eval(mat, w, w, Frame::Sp)[0][0];
                 let got = self.eval(th);
@@ -106,6 +106,6 @@ impl MonostaticTable {
 }
 
 /// The double-bounce term alone (with coherent backscatter as configured) at backscatter.
-fn double_only(mat: &Material, w: [f64; 3]) -> Mat4 {
+fn double_only(mat: &Material, w: V3) -> Mat4 {
     crate::brdf::double::eval_double_framed(mat, w, w, Frame::Sp)
 }

@@ -6,7 +6,7 @@ use super::*;
 use crate::brdf::material::Material;
 use crate::microfacet::masking::ZTable;
 use crate::microfacet::Distribution;
-use crate::optics::frames::normalize;
+use crate::optics::frames::{normalize, V3};
 use crate::optics::fresnel::{Eta, C64};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -106,7 +106,7 @@ fn single_params_equal_the_core_single_term() {
                     a * FRAC_PI_2
                 };
                 let ph = 2.0 * PI * b;
-                [th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]
+                V3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos())
             };
             let wi = dir(u(), u(), k % 4 == 0);
             let wo = dir(u(), u(), k % 8 == 1);
@@ -150,7 +150,7 @@ fn single_params_equal_the_core_single_term() {
 
 fn rotz(v: V3, phi: f64) -> V3 {
     let (s, c) = phi.sin_cos();
-    [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
+    V3::new(c * v[0] - s * v[1], s * v[0] + c * v[1], v[2])
 }
 
 #[test]
@@ -273,10 +273,10 @@ fn table_coords_round_trip() {
     let (t, p, m) = table_coords(0.2, wi, wo);
     assert!(t == 0.0 && (p - 1.0).abs() < 1e-12 && !m);
     // beta = 0
-    let w = normalize([0.3, -0.2, 0.8]);
+    let w = normalize(V3::new(0.3, -0.2, 0.8));
     let (t, p, m) = table_coords(0.0, w, w);
     assert!((t - 0.3f64.hypot(0.2).atan2(0.8)).abs() < 1e-14 && p == 0.0 && !m);
-    let n = [0.0, 0.0, 1.0];
+    let n = V3::Z;
     assert_eq!(table_coords(0.0, n, n), (0.0, 0.0, false));
     assert_eq!(table_coords(0.1, n, n), (0.0, 0.0, false));
 }

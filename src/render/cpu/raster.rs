@@ -37,7 +37,10 @@ pub fn project(mesh: &Mesh, rot: &Rot) -> Vec<Option<Projected>> {
 
 /// The vertices of `mesh` at attitude `rot`.
 pub fn rotate_vertices(mesh: &Mesh, rot: &Rot) -> Vec<V3> {
-    mesh.vertices.iter().map(|&v| rotate(rot, v)).collect()
+    mesh.vertices
+        .iter()
+        .map(|&v| rotate(rot, V3::from(v)))
+        .collect()
 }
 
 /// [`project`] from the vertices already rotated ([`rotate_vertices`]).

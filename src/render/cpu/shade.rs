@@ -47,14 +47,8 @@ impl<F: Fn(usize, V3, V3) -> Mat4 + Sync> Brdf for F {
     fn eval_framed(&self, mat: usize, n: V3, wi: V3, wo: V3, _mask: u32) -> Framed {
         let t1 = neg(any_perp(n));
         let t2 = cross(n, t1);
-        let to_local = |v: V3| [dot(v, t1), dot(v, t2), dot(v, n)];
-        let to_world = |v: V3| {
-            [
-                v[0] * t1[0] + v[1] * t2[0] + v[2] * n[0],
-                v[0] * t1[1] + v[1] * t2[1] + v[2] * n[1],
-                v[0] * t1[2] + v[1] * t2[2] + v[2] * n[2],
-            ]
-        };
+        let to_local = |v: V3| V3::new(dot(v, t1), dot(v, t2), dot(v, n));
+        let to_world = |v: V3| v.x * t1 + v.y * t2 + v.z * n;
         let (wil, wol) = (to_local(wi), to_local(wo));
         let m = self(mat, wil, wol);
         let (xi, _, xo, _) = beam_bases(Frame::Sp, wil, wol);
@@ -80,12 +74,12 @@ impl Brdf for Tables<'_> {
         }
         // the lookup of `shade_at`: b the bisector, e_phi = n x b / |n x b|,
         // psi = atan2((wi - wo).e_phi, (wi - wo).e_theta), e_theta = e_phi x b
-        let b = normalize([wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]]);
+        let b = normalize(wi + wo);
         let cos_t = dot(n, b).clamp(0.0, 1.0);
         let nxb = cross(n, b);
         let sin_t = norm(nxb);
         let e_phi = if sin_t > 0.0 {
-            [nxb[0] / sin_t, nxb[1] / sin_t, nxb[2] / sin_t]
+            nxb / sin_t
         } else {
             any_perp(n)
         };
@@ -93,21 +87,17 @@ impl Brdf for Tables<'_> {
             0.0
         } else {
             let e_theta = cross(e_phi, b);
-            let d = [wi[0] - wo[0], wi[1] - wo[1], wi[2] - wo[2]];
+            let d = wi - wo;
             dot(d, e_phi).atan2(dot(d, e_theta))
         };
         let m = table.eval_masked(cos_t, sin_t, psi, mask);
         // the table's beam bases: x = e_phi made normal to the beam
         let across = |w: V3| {
             let c = dot(e_phi, w);
-            let v = [
-                e_phi[0] - c * w[0],
-                e_phi[1] - c * w[1],
-                e_phi[2] - c * w[2],
-            ];
+            let v = e_phi - c * w;
             let l = dot(v, v).sqrt();
             if l > 1e-15 {
-                [v[0] / l, v[1] / l, v[2] / l]
+                v / l
             } else {
                 any_perp(w)
             }
@@ -125,9 +115,9 @@ impl Brdf for Tables<'_> {
 /// A unit vector normal to unit `k` (as `any_perp` in `shade.wgsl`).
 fn any_perp(k: V3) -> V3 {
     normalize(if k[0].abs() < 0.9 {
-        cross(k, [1.0, 0.0, 0.0])
+        cross(k, V3::X)
     } else {
-        cross(k, [0.0, 1.0, 0.0])
+        cross(k, V3::Y)
     })
 }
 
@@ -217,7 +207,7 @@ pub fn shade_point(
     sensor: &SensorSetup,
     brdf: &(impl Brdf + ?Sized),
 ) -> Option<PixelSample> {
-    let p = mesh.faces[tri].map(|k| rotate(rot, mesh.vertices[k as usize]));
+    let p = mesh.faces[tri].map(|k| rotate(rot, V3::from(mesh.vertices[k as usize])));
     shade_at(mesh, rot, tri, &p, x, y, &Beam::new(sensor, lay), brdf)
 }
 
@@ -240,17 +230,17 @@ pub(super) struct Beam<'a> {
 impl<'a> Beam<'a> {
     pub(super) fn new(sensor: &'a SensorSetup, lay: &Layout) -> Self {
         let beta = sensor.bistatic_angle;
-        let wi = [beta.sin(), 0.0, beta.cos()];
-        let wo = [0.0, 0.0, 1.0];
-        let k_in = [-wi[0], -wi[1], -wi[2]];
-        let x_in_t = normalize(cross(k_in, [0.0, 1.0, 0.0]));
+        let wi = V3::new(beta.sin(), 0.0, beta.cos());
+        let wo = V3::Z;
+        let k_in = neg(wi);
+        let x_in_t = normalize(cross(k_in, V3::Y));
         Beam {
             sensor,
             max_extent: lay.max_extent,
             pix: lay.pix,
             wi,
             wo,
-            sum: [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]],
+            sum: wi + wo,
             x_in_t,
             y_in_t: cross(k_in, x_in_t),
             mask: sensor.element_mask(),
@@ -281,12 +271,10 @@ pub(super) fn shade_at(
     let l0 = 1.0 - l1 - l2;
     let z = l0 * p[0][2] + l1 * p[1][2] + l2 * p[2][2];
     let (wi, wo, s) = (beam.wi, beam.wo, beam.sum);
-    let range = -0.5 * dot([x, y, z], s);
-    let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
-    let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-    let mut ng = normalize(cross(e1, e2));
-    if ng[2] < 0.0 {
-        ng = [-ng[0], -ng[1], -ng[2]];
+    let range = -0.5 * dot(V3::new(x, y, z), s);
+    let mut ng = normalize(cross(p[1] - p[0], p[2] - p[0]));
+    if ng.z < 0.0 {
+        ng = -ng;
     }
     let nz = ng[2].max(1e-12);
     let (dzdx, dzdy) = (-ng[0] / nz, -ng[1] / nz);
@@ -297,12 +285,12 @@ pub(super) fn shade_at(
     if let Some(ns) = &mesh.normals {
         let c = mesh.faces[tri].map(|k| ns[k as usize]);
         let v = [0, 1, 2].map(|d| l0 * c[0][d] + l1 * c[1][d] + l2 * c[2][d]);
-        let v = rotate(rot, v);
+        let v = rotate(rot, V3::from(v));
         let l = dot(v, v).sqrt();
         if l > 1e-15 {
-            n = [v[0] / l, v[1] / l, v[2] / l];
+            n = v / l;
             if dot(n, ng) < 0.0 {
-                n = [-n[0], -n[1], -n[2]];
+                n = -n;
             }
         }
     }
@@ -311,7 +299,7 @@ pub(super) fn shade_at(
         values: [0.0; 16],
         range,
         widths,
-        point: [x, y, z],
+        point: V3::new(x, y, z),
     };
     if ci <= 0.0 || co <= 0.0 {
         return Some(out);

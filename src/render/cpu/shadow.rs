@@ -21,7 +21,7 @@ impl TransmitterView {
         let tris: Vec<[V3; 3]> = mesh
             .faces
             .iter()
-            .map(|f| f.map(|k| rotate(&r, mesh.vertices[k as usize])))
+            .map(|f| f.map(|k| rotate(&r, V3::from(mesh.vertices[k as usize]))))
             .collect();
         let boxes = tris
             .iter()
@@ -53,9 +53,7 @@ pub fn shadowed(view: &TransmitterView, tri: usize, p: V3) -> bool {
     let (s, c) = view.beta.sin_cos();
     // transmitter frame: wi = +z, wo = (-sin beta, 0, cos beta)
     let t = &view.tris[tri];
-    let e1 = [0, 1, 2].map(|d| t[1][d] - t[0][d]);
-    let e2 = [0, 1, 2].map(|d| t[2][d] - t[0][d]);
-    let ng = cross(e1, e2);
+    let ng = cross(t[1] - t[0], t[2] - t[0]);
     let toward_rx = -s * ng[0] + c * ng[2];
     if ng[2] * toward_rx.signum() <= 0.0 {
         return true;
