@@ -249,6 +249,7 @@ class RenderScene:
         progress: Callable[[int, int], object] | None = None,
     ) -> dict[str, Any]: ...
 
+@final
 class RenderRequest:
     """What to render and on what: sensor set-up, outputs, backend, table grid (checked once)."""
 
