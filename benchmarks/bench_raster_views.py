@@ -4,7 +4,8 @@ and with the device's own view count, alternating fresh processes (the setting i
 when a process opens the device), and a fingerprint of the outputs of each, which must be
 equal (multiview draws every layer with the same arithmetic).
 
-``python benchmarks/bench_raster_views.py [--device gpu|cpu|auto] [--rounds 2] [--batches 64 256 2048]``
+``python benchmarks/bench_raster_views.py [--device gpu|cpu|auto] [--rounds 2] [--batches 64 256 2048]
+[--resolution 128]`` (the fingerprint renders use half the resolution).
 
 On lavapipe (6 views) the passes are cheap and the rates close; on an NVIDIA H200 (31
 views, 2026-11-26) the profile-only rates went from 13,200-14,800 to 20,900-22,200/s at
@@ -23,7 +24,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def child(device: str, batches: list[int]) -> dict:
+def child(device: str, batches: list[int], resolution: int) -> dict:
     """In a fresh process: the view count, the outputs' fingerprint and the rates."""
     import numpy as np
 
@@ -33,15 +34,17 @@ def child(device: str, batches: list[int]) -> dict:
     scene = cubesat_scene()
     h = hashlib.sha256()
     q = random_quaternions(37, seed=9)
-    for kw in (dict(resolution=64), dict(resolution=48, pixel_samples=2), dict(resolution=48, bistatic_angle=0.2)):
+    small = max(8, resolution // 2)
+    for kw in (dict(resolution=small), dict(resolution=small, pixel_samples=2),
+               dict(resolution=small, bistatic_angle=0.2)):
         r = pprender.render(scene, pprender.Lidar(**kw), q, outputs=("profile", "mueller", "range"), device=device)
         for a in (r.profile, r.mueller, r.range, r.coverage):
             h.update(np.ascontiguousarray(a).tobytes())
     rows = []
     for label, sensor, outputs in [
-        ("profile only (Stokes, H)", pprender.Lidar(resolution=128, pixel_samples=1, polarization=[1, 1, 0, 0]),
-         ("profile",)),
-        ("full model", pprender.Lidar(resolution=128, pixel_samples=1), ("profile", "mueller", "range")),
+        ("profile only (Stokes, H)", pprender.Lidar(resolution=resolution, pixel_samples=1,
+                                                    polarization=[1, 1, 0, 0]), ("profile",)),
+        ("full model", pprender.Lidar(resolution=resolution, pixel_samples=1), ("profile", "mueller", "range")),
     ]:
         for n in batches:
             qn = random_quaternions(n, seed=n)
@@ -61,11 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default="auto", choices=("gpu", "cpu", "auto"))
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--batches", type=int, nargs="+", default=[64, 256, 2048])
+    ap.add_argument("--resolution", type=int, default=128, help="pixels a side of the timed renders")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.child:
         sys.path.insert(0, HERE)
-        print(json.dumps(child(a.device, a.batches)))
+        print(json.dumps(child(a.device, a.batches, a.resolution)))
         return 0
     runs = []
     for _ in range(a.rounds):
@@ -73,8 +77,8 @@ def main(argv: list[str] | None = None) -> int:
             env = {k: v for k, v in os.environ.items() if k != "PPRENDER_RASTER_VIEWS"}
             if views is not None:
                 env["PPRENDER_RASTER_VIEWS"] = views
-            cmd = [sys.executable, os.path.abspath(__file__), "--child", "--device", a.device, "--batches",
-                   *map(str, a.batches)]
+            cmd = [sys.executable, os.path.abspath(__file__), "--child", "--device", a.device,
+                   "--resolution", str(a.resolution), "--batches", *map(str, a.batches)]
             out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
             runs.append(json.loads(out.strip().splitlines()[-1]))
     hashes = {r["hash"] for r in runs}

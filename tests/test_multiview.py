@@ -31,14 +31,14 @@ SCRIPT = textwrap.dedent("""
     q = np.random.default_rng(7).normal(size=(7, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     out = {{"views": np.array(pprender.device_info("cpu")["raster_views"])}}
-    for i, kw in enumerate(CASES):
+    for i, kw in enumerate(CASES if len(sys.argv) < 3 else []):
         r = pprender.render(scene, pprender.Lidar(**kw), q, outputs=("profile", "mueller", "range"), device="cpu")
         out[f"profile{{i}}"], out[f"mueller{{i}}"], out[f"range{{i}}"] = r.profile, r.mueller, r.range
     np.savez(sys.argv[1], **out)
 """)
 
 
-def _render_in_subprocess(tmp_path, views: str | None) -> dict[str, np.ndarray]:
+def _render_in_subprocess(tmp_path, views: str | None, render: bool = True) -> dict[str, np.ndarray]:
     env = dict(os.environ)
     env.pop("PPRENDER_RASTER_VIEWS", None)
     if views is not None:
@@ -46,7 +46,8 @@ def _render_in_subprocess(tmp_path, views: str | None) -> dict[str, np.ndarray]:
     out = tmp_path / f"views-{views}.npz"
     script = tmp_path / "render.py"
     script.write_text(SCRIPT.format(cases=CASES))
-    r = subprocess.run([sys.executable, str(script), str(out)], env=env, capture_output=True, text=True, timeout=600)
+    args = [sys.executable, str(script), str(out)] + ([] if render else ["views only"])
+    r = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     return dict(np.load(out))
 
@@ -64,7 +65,7 @@ def test_multiview_equals_one_layer_per_pass(tmp_path) -> None:
 @pytest.mark.parametrize("value", ["0", "-3", "many"])
 def test_a_meaningless_views_setting_is_ignored(tmp_path, value) -> None:
     """Only a positive integer caps the views; anything else leaves the device's count."""
-    r = _render_in_subprocess(tmp_path, value)
+    r = _render_in_subprocess(tmp_path, value, render=False)
     assert int(r["views"]) == pprender.device_info("cpu")["raster_views"]
 
 
@@ -72,7 +73,7 @@ def test_the_views_benchmark_runs_and_finds_the_outputs_equal(capsys) -> None:
     """benchmarks/bench_raster_views.py at a tiny size: both view counts, equal outputs."""
     import bench_raster_views
 
-    assert bench_raster_views.main(["--device", "cpu", "--rounds", "1", "--batches", "2"]) == 0
+    assert bench_raster_views.main(["--device", "cpu", "--rounds", "1", "--batches", "2", "--resolution", "24"]) == 0
     out = capsys.readouterr().out
     assert "outputs identical across view counts: yes" in out
     assert "| 1 | profile only (Stokes, H) | 2 |" in out
