@@ -459,6 +459,70 @@ fn quaternions_to_rotations<'py>(
 }
 
 /// Which adapter renders for `device` (creating the device on first use).
+/// The closest hit of each ray `origins[i] + t directions[i]`, `t > t_min`, on the mesh
+/// (`crate::render::bvh::Bvh`, f64): returns `(t, tri)`, `t = inf` and `tri = -1` for a
+/// miss. For tests against other ray casters (trimesh).
+#[pyfunction]
+#[pyo3(signature = (vertices, faces, origins, directions, t_min=0.0))]
+fn ray_cast<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, i64>,
+    origins: PyReadonlyArray2<'py, f64>,
+    directions: PyReadonlyArray2<'py, f64>,
+    t_min: f64,
+) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i64>>)> {
+    use crate::optics::frames::V3;
+    let v = rows3(&vertices, "vertices")?;
+    let o = rows3(&origins, "origins")?;
+    let d = rows3(&directions, "directions")?;
+    if o.len() != d.len() {
+        return Err(crate::Error::Shape(format!(
+            "origins and directions must have the same length, got {} and {}",
+            o.len(),
+            d.len()
+        ))
+        .into());
+    }
+    let f = faces.as_array();
+    if f.ncols() != 3 {
+        return Err(crate::Error::Shape(format!(
+            "faces must have shape (m, 3), got {:?}",
+            f.shape()
+        ))
+        .into());
+    }
+    let mut tris = Vec::with_capacity(f.nrows());
+    for row in f.rows() {
+        let mut t = [V3::ZERO; 3];
+        for (k, &i) in row.iter().enumerate() {
+            if i < 0 || i as usize >= v.len() {
+                return Err(crate::Error::param(
+                    "faces",
+                    i,
+                    format!("vertex indices in [0, {})", v.len()),
+                )
+                .into());
+            }
+            t[k] = V3::from(v[i as usize]);
+        }
+        tris.push(t);
+    }
+    let (t, tri): (Vec<f64>, Vec<i64>) = py.detach(|| {
+        let bvh = crate::render::bvh::Bvh::new(&tris);
+        o.iter()
+            .zip(&d)
+            .map(|(o, d)| {
+                match bvh.closest_hit(V3::from(*o), V3::from(*d), t_min, f64::INFINITY) {
+                    Some(h) => (h.t, h.tri as i64),
+                    None => (f64::INFINITY, -1),
+                }
+            })
+            .unzip()
+    });
+    Ok((Array1::from(t).into_pyarray(py), Array1::from(tri).into_pyarray(py)))
+}
+
 #[pyfunction]
 #[pyo3(signature = (device="auto"))]
 fn device_info<'py>(py: Python<'py>, device: &str) -> PyResult<Bound<'py, PyDict>> {
@@ -487,5 +551,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(quaternions_to_rotations, m)?)?;
     m.add_function(wrap_pyfunction!(sample_offsets, m)?)?;
     m.add_function(wrap_pyfunction!(device_info, m)?)?;
+    m.add_function(wrap_pyfunction!(ray_cast, m)?)?;
     Ok(())
 }

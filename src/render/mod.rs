@@ -92,6 +92,7 @@
 //! kernel's per-pixel footprints `(r0, a, b)`, see [`gpu::host_profile`]).
 
 pub mod api;
+pub mod bvh;
 #[cfg(test)]
 mod compare_gpu_cpu;
 pub mod cpu;

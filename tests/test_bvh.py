@@ -1,0 +1,59 @@
+"""Ray casting against the mesh (``src/render/bvh.rs``, the start of inter-reflections,
+issue 23) against trimesh's ray caster (Embree through embreex) on the 3U CubeSat (11,840
+triangles): the same rays hit or miss the same triangles at the same distance. Measured:
+2,381 hits of 4,000 rays, every one on the same triangle, distances equal to 1.6e-15 of the
+mesh size, no ray hit by one and missed by the other. The limits leave room for a ray that
+grazes an edge (it may take the neighbour, at the same distance) and for Embree's own
+rounding on another platform."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import pprender
+from pprender import _core, models
+
+
+@pytest.fixture(scope="module")
+def mesh() -> trimesh.Trimesh:
+    return models.cubesat("3U")
+
+
+def _rays(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    size = float(np.max(mesh.extents))
+    o = mesh.bounds.mean(axis=0) + rng.normal(size=(n, 3)) * size
+    target = mesh.bounds.mean(axis=0) + rng.uniform(-0.5, 0.5, size=(n, 3)) * mesh.extents
+    d = target - o
+    return o, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def test_closest_hits_match_trimesh_embree(mesh) -> None:
+    o, d = _rays(mesh, 4000, 1)
+    t, tri = _core.ray_cast(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), o, d)
+    loc, idx_ray, idx_tri = mesh.ray.intersects_location(o, d, multiple_hits=False)
+    want_t = np.full(len(o), np.inf)
+    want_tri = np.full(len(o), -1)
+    want_t[idx_ray] = np.einsum("ij,ij->i", loc - o[idx_ray], d[idx_ray])
+    want_tri[idx_ray] = idx_tri
+    size = float(np.max(mesh.extents))
+    both = np.isfinite(t) & np.isfinite(want_t)
+    assert both.sum() > 2000
+    assert np.max(np.abs(t[both] - want_t[both])) < 1e-9 * size
+    assert np.sum(np.isfinite(t) != np.isfinite(want_t)) <= 2
+    # the same triangle, or one at the same distance (a shared edge or a coplanar neighbour)
+    same = (tri[both] == want_tri[both]).mean()
+    assert same > 0.999, same
+
+
+def test_bad_input_is_refused_with_the_parameter_named(mesh) -> None:
+    v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+    o, d = _rays(mesh, 3, 2)
+    with pytest.raises(pprender.Error, match="faces"):
+        _core.ray_cast(v, np.array([[0, 1, len(v)]]), o, d)
+    with pytest.raises(pprender.Error, match="origins"):
+        _core.ray_cast(v, f, o[:, :2], d)
+    with pytest.raises(pprender.Error, match="same length"):
+        _core.ray_cast(v, f, o, d[:2])
