@@ -52,6 +52,7 @@
 pub mod frames;
 pub mod fresnel;
 pub mod mueller;
+pub mod path;
 pub mod polarimetry;
 
 pub use fresnel::{fresnel_amplitudes, Eta, C64};
