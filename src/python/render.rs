@@ -459,6 +459,12 @@ fn quaternions_to_rotations<'py>(
 }
 
 /// Which adapter renders for `device` (creating the device on first use).
+/// `(t, tri)` per ray ([`ray_cast`]).
+type Hits<'py> = (
+    Bound<'py, numpy::PyArray1<f64>>,
+    Bound<'py, numpy::PyArray1<i64>>,
+);
+
 /// The closest hit of each ray `origins[i] + t directions[i]`, `t > t_min`, on the mesh
 /// (`crate::render::bvh::Bvh`, f64): returns `(t, tri)`, `t = inf` and `tri = -1` for a
 /// miss. For tests against other ray casters (trimesh).
@@ -471,7 +477,7 @@ fn ray_cast<'py>(
     origins: PyReadonlyArray2<'py, f64>,
     directions: PyReadonlyArray2<'py, f64>,
     t_min: f64,
-) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i64>>)> {
+) -> PyResult<Hits<'py>> {
     use crate::optics::frames::V3;
     let v = rows3(&vertices, "vertices")?;
     let o = rows3(&origins, "origins")?;
