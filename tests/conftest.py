@@ -2,6 +2,10 @@
 
 * ``rng``: a seeded NumPy generator (``np.random.default_rng(12345)``), fresh per test, so
   every test that draws random geometry is reproducible on its own.
+* Hypothesis runs derandomized by default (profile ``"repeatable"``: the same examples on
+  every run and machine, so CI cannot fail on a case no earlier run saw);
+  ``HYPOTHESIS_PROFILE=explore`` draws fresh random examples (the library's default) for a
+  search. A case found that way is added to its test with ``@example``.
 * ``mitsuba``: the ``mitsuba`` module with the ``llvm_ad_mono_polarized`` variant set
   (vectorized, float32, polarized). Importing Mitsuba is deferred to the first test that
   asks for it. If Mitsuba cannot be imported or the variant is missing, every test using
@@ -19,6 +23,11 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+from hypothesis import settings
+
+settings.register_profile("repeatable", derandomize=True, database=None)
+settings.register_profile("explore")
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 MITSUBA_VARIANT = "llvm_ad_mono_polarized"
 
