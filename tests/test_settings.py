@@ -156,7 +156,7 @@ def test_one_request_object_crosses_into_rust() -> None:
 
 @pytest.mark.parametrize("kw, name", [(dict(resolution=0), "resolution"), (dict(bin_width=-1.0), "bin_width"),
                                       (dict(device="tpu"), "device"), (dict(samples=3), "samples"),
-                                      (dict(pulse_samples=[1.0, 2.0], pulse_spacing=0.0), "dt_range")])
+                                      (dict(pulse_samples=[1.0, 2.0], pulse_spacing=0.0), "pulse_spacing")])
 def test_a_bad_request_is_refused_when_built(kw, name) -> None:
     with pytest.raises(pprender.Error, match=name):
         _request(**kw)

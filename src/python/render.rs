@@ -83,6 +83,14 @@ impl PyRenderRequest {
         double_order: Option<usize>,
         in_shader: bool,
     ) -> PyResult<Self> {
+        if pulse_samples.is_some() && !(pulse_spacing.is_finite() && pulse_spacing > 0.0) {
+            return Err(crate::Error::param(
+                "pulse_spacing",
+                pulse_spacing,
+                "finite and > 0 (m) with pulse_samples",
+            )
+            .into());
+        }
         let sensor = SensorSetup {
             resolution,
             supersampling,
