@@ -44,9 +44,8 @@
 //! (factor 2) and vanishes for `gamma < 1e-6` (skipped). Its angular integral is of order
 //! `(lambda / l)^2` and is left out of the energy bookkeeping.
 
-use super::single::facet_sp_basis;
 use super::surface::Surface;
-use crate::optics::frames::{beam_bases, dot, neg, normalize, reflect, Frame, V3};
+use crate::optics::frames::{beam_bases, dot, facet_sp_basis, neg, normalize, reflect, Frame, V3};
 use crate::optics::fresnel::{fresnel_amplitudes, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 use std::f64::consts::PI;

@@ -1,25 +1,9 @@
 //! Single-bounce term and the specular (flat-interface) Mueller matrix.
 
 use super::surface::Surface;
-use crate::optics::frames::{beam_bases, cross, dot, neg, normalize, Frame, V3};
+use crate::optics::frames::{beam_bases, dot, facet_sp_basis, neg, normalize, Frame, V3};
 use crate::optics::fresnel::{fresnel_amplitudes, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
-
-/// The s/p basis of a reflection off the facet `h` (`k_in`, `k_out` the propagation
-/// directions): `s = normalize(k_in x h)`, `p_in = k_in x s`, `p_out = k_out x s`. When
-/// `k_in` is along `h` (normal incidence on the facet) any `s` normal to `k_in` will do, as
-/// the reflection does not depend on the choice there: `perp`, a unit vector normal to
-/// `k_in` supplied by the caller, is used.
-#[inline]
-pub(crate) fn facet_sp_basis(k_in: V3, k_out: V3, h: V3, perp: V3) -> (V3, V3, V3) {
-    let c = cross(k_in, h);
-    let s = if dot(c, c) > 1e-24 {
-        normalize(c)
-    } else {
-        perp
-    };
-    (s, cross(k_in, s), cross(k_out, s))
-}
 
 /// Jones matrix, in the beam frames `(x_in, y_in) -> (x_out, y_out)`, of a reflection off a
 /// facet with normal `h` for the incident beam `k_in = -wi` (polarization ray tracing).

@@ -36,6 +36,22 @@ pub fn reflect(v: V3, h: V3, v_dot_h: f64) -> V3 {
     2.0 * v_dot_h * h - v
 }
 
+/// The s/p basis of a reflection off the facet `h` (`k_in`, `k_out` the propagation
+/// directions): `s = normalize(k_in x h)`, `p_in = k_in x s`, `p_out = k_out x s`. When
+/// `k_in` is along `h` (normal incidence on the facet) any `s` normal to `k_in` will do, as
+/// the reflection does not depend on the choice there: `perp`, a unit vector normal to
+/// `k_in` supplied by the caller, is used.
+#[inline]
+pub fn facet_sp_basis(k_in: V3, k_out: V3, h: V3, perp: V3) -> (V3, V3, V3) {
+    let c = cross(k_in, h);
+    let s = if dot(c, c) > 1e-24 {
+        normalize(c)
+    } else {
+        perp
+    };
+    (s, cross(k_in, s), cross(k_out, s))
+}
+
 /// Which transverse bases the returned Mueller matrices refer to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Frame {

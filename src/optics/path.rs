@@ -7,12 +7,13 @@
 //! A reflection off a surface with unit normal `n` (facing the arriving beam) takes the
 //! propagation `k` to `k' = k - 2 (k.n) n` and the field through
 //! `P = rs s s^T + rp p' p^T + k' k^T`, with `s = normalize(k x n)`, `p = k x s`,
-//! `p' = k' x s` (at normal incidence `s` is a given vector normal to `k`). The `k' k^T`
+//! `p' = k' x s` ([`facet_sp_basis`]; at normal incidence `s` is a given vector normal to
+//! `k`). The `k' k^T`
 //! term keeps `P` invertible and carries no field (fields are transverse). A path's matrix
 //! is the product `P_m ... P_1`, and its Jones matrix in bases `(x_in, y_in = k_in x x_in)`,
 //! `(x_out, y_out = k_out x x_out)` is `J_ab = x_out_a . P x_in_b`.
 
-use super::frames::{cross, dot, normalize, V3};
+use super::frames::{cross, dot, facet_sp_basis, normalize, V3};
 use super::fresnel::{fresnel_amplitudes, Eta, C64};
 use super::mueller::{jones_to_mueller, Jones, Mat4};
 
@@ -61,13 +62,7 @@ pub fn reflection(k: V3, n: V3, eta: Eta, perp: V3) -> Option<(V3, CMat3)> {
         return None;
     }
     let k_out = k + (2.0 * cos_i) * n;
-    let c = cross(k, n);
-    let s = if dot(c, c) > 1e-24 {
-        normalize(c)
-    } else {
-        perp
-    };
-    let (p_in, p_out) = (cross(k, s), cross(k_out, s));
+    let (s, p_in, p_out) = facet_sp_basis(k, k_out, n, perp);
     let (rs, rp) = fresnel_amplitudes(cos_i.min(1.0), eta);
     let one = C64::new(1.0, 0.0);
     let m = add(

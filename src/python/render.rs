@@ -144,6 +144,34 @@ impl PyRenderRequest {
     }
 }
 
+/// `faces` (n, 3) as vertex-index triples, each index in `[0, u32::MAX]` (the upper bound
+/// against the vertex count is the caller's: `Mesh::new`, or [`ray_cast`]).
+fn faces3(faces: &PyReadonlyArray2<'_, i64>, n_vertices: usize) -> crate::Result<Vec<[u32; 3]>> {
+    let fv = faces.as_array();
+    if fv.ncols() != 3 {
+        return Err(crate::Error::Shape(format!(
+            "faces must have shape (n, 3), got {:?}",
+            fv.shape()
+        )));
+    }
+    let mut fs = Vec::with_capacity(fv.nrows());
+    for (i, r) in fv.rows().into_iter().enumerate() {
+        let mut f = [0u32; 3];
+        for k in 0..3 {
+            if r[k] < 0 || r[k] > u32::MAX as i64 {
+                return Err(crate::Error::param(
+                    "faces",
+                    format!("{:?} at index {i}", r.to_vec()),
+                    format!("vertex indices in [0, {n_vertices})"),
+                ));
+            }
+            f[k] = r[k] as u32;
+        }
+        fs.push(f);
+    }
+    Ok(fs)
+}
+
 /// Table grid overrides from Python (`None`: the default of `BrdfTableOptions::resolve`).
 #[allow(clippy::too_many_arguments)]
 fn table_options(
@@ -187,30 +215,7 @@ impl PyRenderScene {
             return Err(crate::Error::param("materials", "[]", "at least one Material").into());
         }
         let verts = rows3(&vertices, "vertices")?;
-        let fv = faces.as_array();
-        if fv.ncols() != 3 {
-            return Err(crate::Error::Shape(format!(
-                "faces must have shape (n, 3), got {:?}",
-                fv.shape()
-            ))
-            .into());
-        }
-        let mut fs = Vec::with_capacity(fv.nrows());
-        for (i, r) in fv.rows().into_iter().enumerate() {
-            let mut f = [0u32; 3];
-            for k in 0..3 {
-                if r[k] < 0 || r[k] > u32::MAX as i64 {
-                    return Err(crate::Error::param(
-                        "faces",
-                        format!("{:?} at index {i}", r.to_vec()),
-                        format!("vertex indices in [0, {})", verts.len()),
-                    )
-                    .into());
-                }
-                f[k] = r[k] as u32;
-            }
-            fs.push(f);
-        }
+        let fs = faces3(&faces, verts.len())?;
         let fm: Vec<u32> = face_material
             .as_array()
             .iter()
@@ -498,29 +503,17 @@ fn ray_cast<'py>(
         ))
         .into());
     }
-    let f = faces.as_array();
-    if f.ncols() != 3 {
-        return Err(crate::Error::Shape(format!(
-            "faces must have shape (m, 3), got {:?}",
-            f.shape()
-        ))
-        .into());
-    }
-    let mut tris = Vec::with_capacity(f.nrows());
-    for row in f.rows() {
-        let mut t = [V3::ZERO; 3];
-        for (k, &i) in row.iter().enumerate() {
-            if i < 0 || i as usize >= v.len() {
-                return Err(crate::Error::param(
-                    "faces",
-                    i,
-                    format!("vertex indices in [0, {})", v.len()),
-                )
-                .into());
-            }
-            t[k] = V3::from(v[i as usize]);
+    let mut tris = Vec::new();
+    for (i, f) in faces3(&faces, v.len())?.into_iter().enumerate() {
+        if f.iter().any(|&k| k as usize >= v.len()) {
+            return Err(crate::Error::param(
+                "faces",
+                format!("{f:?} at index {i}"),
+                format!("vertex indices in [0, {})", v.len()),
+            )
+            .into());
         }
-        tris.push(t);
+        tris.push(f.map(|k| V3::from(v[k as usize])));
     }
     let (t, tri): (Vec<f64>, Vec<i64>) = py.detach(|| {
         let bvh = crate::render::bvh::Bvh::new(&tris);
