@@ -188,9 +188,9 @@ impl Plan {
         let mem_per = per_att.iter().sum::<u64>() + px * 4 * sensor.samples as u64 + shadow_maps;
         chunk = chunk.min(((512u64 << 20) / mem_per.max(1)).max(1) as usize);
         // and its readback (images, range maps, profiles) within READBACK_BYTES: on an H200
-        // the full model (1.1 MiB a attitude at 128 x 128) ran at 4,500 attitudes/s in
-        // calls of 64 and 1,600/s in calls of 128 or 256 made of one chunk
-        // (docs/gpu-benchmark.md); chunks of a call share their buffers
+        // a call of 128 or more full-model attitudes (1.1 MiB each at 128 x 128) as one
+        // chunk spent tens of milliseconds creating its buffers and ran at under half the
+        // rate of calls of 64 (issue 22's closing note); the chunks of a call share them
         let readback_per = per_att[0] + per_att[1] + per_att[2];
         chunk = chunk.min((READBACK_BYTES / readback_per.max(1)).max(1) as usize);
         if chunk == 0 || biggest > max_binding {
