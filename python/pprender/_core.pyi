@@ -279,6 +279,9 @@ class RenderRequest:
         n_psi_double: int | None = None,
         double_order: int | None = None,
         in_shader: bool = False,
+        bounces: int = 1,
+        path_samples: int = 16,
+        path_seed: int = 0,
     ) -> RenderRequest: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...

@@ -16,6 +16,13 @@ use crate::optics::mueller::Mat4;
 /// enabled terms. `wi`, `wo` are unit vectors with `z >= 0`; a direction on the horizon
 /// (`z == 0`) gives the zero matrix (the cross-section integrand `f cos` vanishes there).
 pub fn sum_terms(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
+    sum_terms_except(mat, wi, wo, frame, None)
+}
+
+/// [`sum_terms`] without the term `skip` (if enabled): `Some(Term::Double)` is the BRDF a
+/// surface met along an inter-reflection path is evaluated with ([`crate::render::paths`]:
+/// the double bounce's quadrature per path vertex would cost more than the path).
+pub fn sum_terms_except(mat: &Material, wi: V3, wo: V3, frame: Frame, skip: Option<Term>) -> Mat4 {
     let mut m = [[0.0; 4]; 4];
     let (ci, co) = (wi[2], wo[2]);
     if ci <= 0.0 || co <= 0.0 {
@@ -24,7 +31,7 @@ pub fn sum_terms(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
     let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
     let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
     let (zi, zo) = (mat.z_of(ci, si), mat.z_of(co, so));
-    for term in mat.spec.terms.iter() {
+    for term in mat.spec.terms.iter().filter(|&t| Some(t) != skip) {
         match term {
             // first in Term::ALL: it starts the sum (m is still zero; assigned, so that the
             // signs of its zeros are kept)

@@ -56,7 +56,7 @@ impl PyRenderRequest {
         intensity_only, sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
         pulse_spacing=0.0, analytic=false, n_z=None, n_psi=None, n_z_lambertian=None,
         n_psi_lambertian=None, n_z_double=None, n_psi_double=None, double_order=None,
-        in_shader=false))]
+        in_shader=false, bounces=1, path_samples=16, path_seed=0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         resolution: usize,
@@ -82,6 +82,9 @@ impl PyRenderRequest {
         n_psi_double: Option<usize>,
         double_order: Option<usize>,
         in_shader: bool,
+        bounces: usize,
+        path_samples: usize,
+        path_seed: u32,
     ) -> PyResult<Self> {
         if pulse_samples.is_some() && !(pulse_spacing.is_finite() && pulse_spacing > 0.0) {
             return Err(crate::Error::param(
@@ -104,6 +107,11 @@ impl PyRenderRequest {
             pulse: pulse_samples
                 .map(|v| SampledPulse::new(&v, pulse_spacing).map(Arc::new))
                 .transpose()?,
+            paths: crate::render::paths::PathSetup {
+                bounces,
+                samples: path_samples,
+                seed: path_seed,
+            },
         };
         crate::render::check_sensor(&sensor)?;
         Ok(PyRenderRequest {
@@ -131,11 +139,15 @@ impl PyRenderRequest {
         let s = &self.sensor;
         format!(
             "RenderRequest(resolution={}, supersampling={}, samples={}, bistatic_angle={}, \
-             image={}, range={}, profile={}, backend={:?})",
+             bounces={}, path_samples={}, path_seed={}, image={}, range={}, profile={}, \
+             backend={:?})",
             s.resolution,
             s.supersampling,
             s.samples,
             s.bistatic_angle,
+            s.paths.bounces,
+            s.paths.samples,
+            s.paths.seed,
             self.outputs.image,
             self.outputs.range,
             self.outputs.profile,
@@ -382,6 +394,20 @@ impl PyRenderScene {
             let a = Array3::from_shape_vec((n, r.n_bins, c), p).expect("shape");
             d.set_item("profile", a.into_pyarray(py))?;
         }
+        if !r.bounce_total.is_empty() {
+            let k = r.bounce_total.len() / (n * c);
+            let a = Array3::from_shape_vec((n, k, c), r.bounce_total).expect("shape");
+            d.set_item("bounce_total", a.into_pyarray(py))?;
+            if let Some(p) = r.bounce_profile {
+                let a = Array4::from_shape_vec((n, k, r.n_bins, c), p).expect("shape");
+                d.set_item("bounce_profile", a.into_pyarray(py))?;
+            }
+            if let Some(img) = r.bounce_image {
+                let a =
+                    numpy::ndarray::Array5::from_shape_vec((n, k, h, w, c), img).expect("shape");
+                d.set_item("bounce_image", a.into_pyarray(py))?;
+            }
+        }
         let edges: Vec<f64> = (0..=r.n_bins)
             .map(|k| r.r_min + k as f64 * r.bin_width)
             .collect();
@@ -519,15 +545,18 @@ fn ray_cast<'py>(
         let bvh = crate::render::bvh::Bvh::new(&tris);
         o.iter()
             .zip(&d)
-            .map(|(o, d)| {
-                match bvh.closest_hit(V3::from(*o), V3::from(*d), t_min, f64::INFINITY) {
+            .map(
+                |(o, d)| match bvh.closest_hit(V3::from(*o), V3::from(*d), t_min, f64::INFINITY) {
                     Some(h) => (h.t, h.tri as i64),
                     None => (f64::INFINITY, -1),
-                }
-            })
+                },
+            )
             .unzip()
     });
-    Ok((Array1::from(t).into_pyarray(py), Array1::from(tri).into_pyarray(py)))
+    Ok((
+        Array1::from(t).into_pyarray(py),
+        Array1::from(tri).into_pyarray(py),
+    ))
 }
 
 #[pyfunction]

@@ -17,6 +17,50 @@ pub struct Outputs {
     pub profile: bool,
 }
 
+/// The most bounces a path may have.
+pub const MAX_BOUNCES: usize = 3;
+/// The most paths per pixel.
+pub const MAX_PATH_SAMPLES: usize = 1 << 16;
+
+/// How inter-reflections are rendered: the most bounces of a path (1 to [`MAX_BOUNCES`]; 1
+/// traces no path), the paths per pixel (1 to [`MAX_PATH_SAMPLES`]) and the seed of their
+/// random numbers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PathSetup {
+    pub bounces: usize,
+    pub samples: usize,
+    pub seed: u32,
+}
+
+impl Default for PathSetup {
+    fn default() -> Self {
+        PathSetup {
+            bounces: 1,
+            samples: 16,
+            seed: 0,
+        }
+    }
+}
+
+/// Refuse bounces outside `1..=MAX_BOUNCES` and path counts outside `1..=MAX_PATH_SAMPLES`.
+pub fn check_paths(p: &PathSetup) -> Result<()> {
+    if !(1..=MAX_BOUNCES).contains(&p.bounces) {
+        return Err(Error::param(
+            "bounces",
+            p.bounces,
+            format!("an integer in [1, {MAX_BOUNCES}]: the most reflections of a path"),
+        ));
+    }
+    if !(1..=MAX_PATH_SAMPLES).contains(&p.samples) {
+        return Err(Error::param(
+            "path_samples",
+            p.samples,
+            format!("an integer in [1, {MAX_PATH_SAMPLES}]: paths per pixel"),
+        ));
+    }
+    Ok(())
+}
+
 /// The sensor after validation, in the renderer's units.
 #[derive(Debug, Clone)]
 pub struct SensorSetup {
@@ -48,6 +92,9 @@ pub struct SensorSetup {
     /// per-pixel footprints (see [`crate::render::gpu::host_profile`]); `sigma_range` is
     /// then unused.
     pub pulse: Option<Arc<SampledPulse>>,
+    /// Inter-reflections between parts ([`crate::render::paths`]): the bounces, paths per
+    /// pixel and seed. The default renders one bounce (no paths).
+    pub paths: PathSetup,
 }
 
 impl SensorSetup {
@@ -123,6 +170,13 @@ pub struct Rendered {
     pub n_bins: usize,
     pub pixel_size: f64,
     pub extent: f64,
+    /// With `bounces > 1` ([`PathSetup`]): the outputs split by the number of bounces `k`
+    /// (index `k - 1`, `k` up to `bounces`; they sum to `image`, `profile`, `total`):
+    /// (n, bounces, h, w, channels) with the image, (n, bounces, bins, channels) with the
+    /// profile, (n, bounces, channels). None (empty) with one bounce.
+    pub bounce_image: Option<Vec<f32>>,
+    pub bounce_profile: Option<Vec<f64>>,
+    pub bounce_total: Vec<f64>,
     /// Wall-clock seconds of this render's stages, in order (a diagnostic: on the GPU
     /// `plan`, `pipeline and buffers`, `encode and submit`, `device`, `readback`; one
     /// `render` stage on the CPU backends).
@@ -154,7 +208,9 @@ impl Layout {
             }
             None => PULSE_SUPPORT_SIGMAS * s.sigma_range,
         };
-        let half = ext + max_extent + support;
+        // a path of `b` bounces lands at most `b ext` behind the origin (its extra length:
+        // at most `2 ext` per segment between surfaces)
+        let half = s.paths.bounces.max(1) as f64 * ext + max_extent + support;
         // bin edges at integer multiples of the bin width (the same grid for every scene
         // and pulse with this bin width), symmetric about the range origin
         let k = (half / s.bin_width).ceil().max(1.0);
@@ -239,6 +295,7 @@ pub fn check_sensor(s: &SensorSetup) -> Result<()> {
         ));
     }
     check_samples(s.samples)?;
+    check_paths(&s.paths)?;
     if s.analytic && s.samples != 1 {
         return Err(Error::param(
             "pixel_samples",

@@ -76,10 +76,10 @@ pub fn intersect(o: V3, d: V3, tri: &[V3; 3], t_min: f64, t_max: f64) -> Option<
     (t > t_min && t < t_max).then_some((t, u, v))
 }
 
-/// Whether the ray meets the box within `(t_min, t_max)` (slabs; `inv_d` = 1 / d per axis,
-/// infinite for a zero component).
+/// Where the ray enters the box within `(t_min, t_max)` (slabs; `inv_d` = 1 / d per axis,
+/// infinite for a zero component), or `None` if it misses it there.
 #[inline]
-fn hits_box(o: V3, inv_d: V3, lo: V3, hi: V3, t_min: f64, t_max: f64) -> bool {
+fn box_entry(o: V3, inv_d: V3, lo: V3, hi: V3, t_min: f64, t_max: f64) -> Option<f64> {
     let (mut t0, mut t1) = (t_min, t_max);
     for k in 0..3 {
         let (a, b) = ((lo[k] - o[k]) * inv_d[k], (hi[k] - o[k]) * inv_d[k]);
@@ -92,10 +92,10 @@ fn hits_box(o: V3, inv_d: V3, lo: V3, hi: V3, t_min: f64, t_max: f64) -> bool {
             t1 = far;
         }
         if t0 > t1 {
-            return false;
+            return None;
         }
     }
-    true
+    Some(t0)
 }
 
 fn bounds(tris: &[[V3; 3]]) -> (V3, V3) {
@@ -184,15 +184,21 @@ impl Bvh {
             return;
         }
         let inv_d = V3::ONE / d;
-        let mut stack = [0u32; 64];
+        let root = &self.nodes[0];
+        let Some(t_root) = box_entry(o, inv_d, root.lo, root.hi, t_min, *t_far) else {
+            return;
+        };
+        // nodes to visit with where the ray enters their boxes: the nearer child on top
+        let mut stack = [(0u32, 0.0f64); 64];
+        stack[0] = (0, t_root);
         let mut top = 1;
         while top > 0 {
             top -= 1;
-            let idx = stack[top];
-            let n = self.nodes[idx as usize];
-            if !hits_box(o, inv_d, n.lo, n.hi, t_min, *t_far) {
+            let (idx, t_enter) = stack[top];
+            if t_enter > *t_far {
                 continue;
             }
+            let n = self.nodes[idx as usize];
             if n.count > 0 {
                 for k in n.first as usize..(n.first + n.count) as usize {
                     if skip == Some(self.order[k]) {
@@ -206,10 +212,32 @@ impl Bvh {
                     }
                 }
             } else {
-                // the right child (`first`) under the left one (the next node), visited first
-                stack[top] = n.first;
-                stack[top + 1] = idx + 1;
-                top += 2;
+                let (l, r) = (idx + 1, n.first);
+                let enter = |c: u32| {
+                    let b = &self.nodes[c as usize];
+                    box_entry(o, inv_d, b.lo, b.hi, t_min, *t_far)
+                };
+                match (enter(l), enter(r)) {
+                    (Some(tl), Some(tr)) => {
+                        let (near, far) = if tl <= tr {
+                            ((l, tl), (r, tr))
+                        } else {
+                            ((r, tr), (l, tl))
+                        };
+                        stack[top] = far;
+                        stack[top + 1] = near;
+                        top += 2;
+                    }
+                    (Some(tl), None) => {
+                        stack[top] = (l, tl);
+                        top += 1;
+                    }
+                    (None, Some(tr)) => {
+                        stack[top] = (r, tr);
+                        top += 1;
+                    }
+                    (None, None) => {}
+                }
             }
         }
     }

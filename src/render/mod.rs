@@ -8,7 +8,9 @@
 //! twins and the exact reference); [`samples`] and [`downsample`]: the pixel's sample
 //! pattern and the supersampling reduction both backends share; [`geometry`]: meshes and
 //! attitudes; [`pulse`]: pulse shapes and bin weights; [`tables`]: a scene's material
-//! tables, cached per bistatic angle. The GPU-vs-CPU tests are in `compare_gpu_cpu.rs`.
+//! tables, cached per bistatic angle; [`bvh`] and [`paths`]: ray casting and the
+//! inter-reflections between parts (2 and 3 bounces, on the CPU for every backend). The
+//! GPU-vs-CPU tests are in `compare_gpu_cpu.rs`.
 //!
 //! # Conventions (the one place they are written down)
 //!
@@ -84,7 +86,9 @@
 //! seen by `c` of `K` samples: at their mean point, widths scaled by the extent of those
 //! samples across the pixel in `u` and `v`, `max - min + 1/K`); convolved with
 //! the received pulse (range FWHM `c tau / 2`) and integrated over each bin
-//! ([`pulse`]). The bins cover the bounding sphere plus the pulse support, so the weights
+//! ([`pulse`]). The bins cover the bounding sphere plus the pulse support (with
+//! inter-reflections of up to `b` bounces, [`paths`], `b` times its radius on each side:
+//! a path lands at most that far behind the origin), so the weights
 //! of every pixel sum to one and the profile sums to the total cross-section. Bin edges
 //! are integer multiples of the bin width, symmetric about the range origin. The pulse is
 //! a Gaussian (accumulated on the device) or a sampled shape with its centroid at range 0
@@ -99,6 +103,7 @@ pub mod cpu;
 pub mod downsample;
 pub mod geometry;
 pub mod gpu;
+pub mod paths;
 pub mod pulse;
 pub mod request;
 pub mod samples;

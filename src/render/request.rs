@@ -7,6 +7,7 @@ use super::api::{Outputs, Progress, Rendered, SensorSetup};
 use super::cpu;
 use super::geometry::{Mesh, Rot};
 use super::gpu::{self, DeviceChoice};
+use super::paths;
 use super::tables::SceneTables;
 use crate::brdf::table::BrdfTableOptions;
 use crate::error::Result;
@@ -58,6 +59,14 @@ pub fn render(
     } = *request;
     gpu::check_batch(rotations)?;
     let beta = sensor.bistatic_angle;
+    // with inter-reflections the backend's pass is the first half of the progress
+    let with_paths = sensor.paths.bounces > 1;
+    let n = rotations.len();
+    let halved = |done: usize, _: usize| progress.is_none_or(|p| p(done, 2 * n));
+    let backend_progress: Progress = match progress {
+        Some(_) if with_paths => Some(&halved),
+        _ => progress,
+    };
     let timed = std::time::Instant::now();
     let seconds = |built: bool| {
         if built {
@@ -66,7 +75,7 @@ pub fn render(
             0.0
         }
     };
-    let (rendered, device, table_seconds) = match backend {
+    let (mut rendered, device, table_seconds) = match backend {
         Backend::Reference => {
             cpu::check_cpu_render(mesh, sensor, rotations.len(), outputs)?;
             let t = std::time::Instant::now();
@@ -76,7 +85,7 @@ pub fn render(
                 rotations,
                 outputs,
                 &tables.materials,
-                progress,
+                backend_progress,
             )?;
             r.stage_seconds = vec![("render", t.elapsed().as_secs_f64())];
             (r, "reference (f64 CPU, exact BRDFs)".to_string(), 0.0)
@@ -86,8 +95,14 @@ pub fn render(
             let (_, f64_tables, built) = tables.get_with_tables(beta, table_options)?;
             let t = seconds(built);
             let started = std::time::Instant::now();
-            let mut r =
-                cpu::render_tables(mesh, sensor, rotations, outputs, &f64_tables, progress)?;
+            let mut r = cpu::render_tables(
+                mesh,
+                sensor,
+                rotations,
+                outputs,
+                &f64_tables,
+                backend_progress,
+            )?;
             r.stage_seconds = vec![("tables", t), ("render", started.elapsed().as_secs_f64())];
             (r, "f64 twin (CPU, BRDF tables)".to_string(), t)
         }
@@ -97,13 +112,36 @@ pub fn render(
             let started = std::time::Instant::now();
             let g = gpu::context(choice)?;
             let context = started.elapsed().as_secs_f64();
-            let mut r =
-                gpu::render_with_progress(&g, mesh, &packed, sensor, rotations, outputs, progress)?;
+            let mut r = gpu::render_with_progress(
+                &g,
+                mesh,
+                &packed,
+                sensor,
+                rotations,
+                outputs,
+                backend_progress,
+            )?;
             r.stage_seconds
                 .splice(0..0, [("tables", t), ("device context", context)]);
             (r, g.info.name.clone(), t)
         }
     };
+    if with_paths {
+        let started = std::time::Instant::now();
+        let sums = paths::render_paths(
+            mesh,
+            sensor,
+            rotations,
+            outputs,
+            &paths::Materials(&tables.materials),
+            progress,
+            (n, 2 * n),
+        )?;
+        paths::add_paths(&mut rendered, sensor, &sums);
+        rendered
+            .stage_seconds
+            .push(("paths", started.elapsed().as_secs_f64()));
+    }
     Ok(RenderOutput {
         rendered,
         device,

@@ -88,6 +88,7 @@ pub fn lambert_sensor(res: usize) -> SensorSetup {
         sigma_range: 0.01,
         bin_width: 0.02,
         pulse: None,
+        paths: Default::default(),
     }
 }
 

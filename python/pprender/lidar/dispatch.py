@@ -243,6 +243,9 @@ def render(
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
         analytic=st.coverage == "analytic",
+        bounces=int(st.bounces),
+        path_samples=st.effective_path_samples(),
+        path_seed=int(st.path_seed),
         **topts,
     )
     d = scene._core.render(rot, request, progress=progress)
@@ -274,4 +277,23 @@ def render(
     if "range" in d:
         r.range = d["range"]
         r.coverage = d["coverage"]
+    if "bounce_total" in d:
+        bt = d["bounce_total"]
+        k = bt.shape[1]
+        by: dict[str, np.ndarray] = {
+            "cross_section": bt.reshape(n, k, 4, 4) if mueller_out else (bt[..., 0] if sensor.intensity_only else bt)
+        }
+        if "bounce_profile" in d:
+            p = d["bounce_profile"]
+            by["profile"] = (p.reshape(p.shape[:3] + (4, 4)) if mueller_out
+                             else (p[..., 0] if sensor.intensity_only else p))
+        if "bounce_image" in d:
+            img = d["bounce_image"]
+            if mueller_out:
+                by["mueller"] = img.reshape(img.shape[:4] + (4, 4))
+            elif sensor.intensity_only:
+                by["intensity"] = img[..., 0]
+            else:
+                by["stokes"] = img
+        r.by_bounce = by
     return r

@@ -51,7 +51,15 @@ class RenderResult:
         ``pipeline and buffers`` (shader compilation on first use), ``encode and submit``,
         ``device`` (waiting for the GPU), ``readback`` (mapping and decoding the results)
         on a device; ``tables`` and ``render`` for ``arithmetic="f64"``, ``render`` for
-        ``quality="reference"``; then ``to NumPy``. Empty for a result assembled by hand.
+        ``quality="reference"``; then ``paths`` (with ``bounces`` > 1) and ``to NumPy``.
+        Empty for a result assembled by hand.
+    by_bounce : dict or None
+        With ``bounces`` > 1 (:class:`~pprender.lidar.settings.Settings`): the outputs split
+        by the number of reflections, a bounce axis after the attitude's (index ``k - 1``
+        for ``k`` bounces, summing to the totals): ``"cross_section"`` (N, K, ...) and, as
+        requested, ``"profile"`` (N, K, B, ...) and ``"mueller"``/``"stokes"``/``"intensity"``
+        (N, K, H, W, ...). Odd and even numbers of bounces are what radar polarimetry
+        separates (even ones keep circular handedness). None with one bounce.
     extra : dict
         Free-form additions; empty as :func:`pprender.render` returns it.
     wavelength : float or None
@@ -78,6 +86,7 @@ class RenderResult:
     coverage: np.ndarray | None = None
     table_seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
+    by_bounce: dict[str, np.ndarray] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     #: The sensor's wavelength (m) the render was made at (the materials' wavelength);
     #: None for a result assembled by hand.

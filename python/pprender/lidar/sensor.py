@@ -86,6 +86,9 @@ class Lidar:
     brdf : {"table", "shader"}, optional
         A render setting: see :class:`~pprender.lidar.settings.Settings` (it is validated
         there; ``render(settings=...)`` overrides the Lidar's).
+    bounces, path_samples, path_seed : int, optional
+        Render settings (inter-reflections): see :class:`~pprender.lidar.settings.Settings`
+        (validated there; ``render(settings=...)`` overrides the Lidar's).
 
     Raises
     ------
@@ -118,6 +121,9 @@ class Lidar:
     intensity_only: bool = False
     arithmetic: str | None = None
     brdf: str = "table"
+    bounces: int = 1
+    path_samples: int | None = None
+    path_seed: int = 0
 
     def __post_init__(self) -> None:
         if not isinstance(self.intensity_only, (bool, np.bool_)):
@@ -136,7 +142,8 @@ class Lidar:
         settings = Settings(resolution=self.resolution, supersampling=self.supersampling,
                             pixel_samples=self.pixel_samples, coverage=self.coverage,
                             quality=self.quality, table=self.table, arithmetic=self.arithmetic,
-                            brdf=self.brdf)
+                            brdf=self.brdf, bounces=self.bounces, path_samples=self.path_samples,
+                            path_seed=self.path_seed)
         object.__setattr__(self, "table", settings.table)
         object.__setattr__(self, "_settings", settings)
         b = self.bistatic_angle

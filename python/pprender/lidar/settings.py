@@ -22,19 +22,22 @@ _TABLE_KEYS = ("n_z", "n_psi", "n_z_lambertian", "n_psi_lambertian", "n_z_double
 #: The quality presets of :class:`Lidar` (``quality=``): BRDF table grids (keywords of
 #: :func:`pprender.brdf_table`; absent keys take its defaults: single n_z 256 / n_psi 32,
 #: multiple + diffuse 256 / 8, double 32 / 8 at order 48) and the default image
-#: resolution (pixels across one range FWHM) and visibility samples per pixel.
+#: resolution (pixels across one range FWHM), visibility samples per pixel and paths per
+#: pixel of inter-reflections (with ``bounces`` > 1).
 #: ``"reference"`` renders on the CPU in f64
 #: with exact BRDFs (no tables). Their cost and error are measured in docs/tradeoff.md.
 QUALITY: dict[str, dict[str, Any]] = {
     "fast": {"table": {"n_z": 64, "n_psi": 16, "n_z_lambertian": 64, "n_psi_lambertian": 4,
                        "n_z_double": 16, "n_psi_double": 4, "double_order": 32},
-             "pixels_per_fwhm": 2.0, "min_resolution": 32, "pixel_samples": 1},
-    "balanced": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64, "pixel_samples": 8},
+             "pixels_per_fwhm": 2.0, "min_resolution": 32, "pixel_samples": 1, "path_samples": 4},
+    "balanced": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64, "pixel_samples": 8,
+                 "path_samples": 16},
     "accurate": {"table": {"n_z": 1024, "n_psi": 64, "n_z_lambertian": 512,
                            "n_psi_lambertian": 16, "n_z_double": 64, "n_psi_double": 16,
                            "double_order": 96},
-                 "pixels_per_fwhm": 8.0, "min_resolution": 64, "pixel_samples": 16},
-    "reference": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64, "pixel_samples": 16},
+                 "pixels_per_fwhm": 8.0, "min_resolution": 64, "pixel_samples": 16, "path_samples": 64},
+    "reference": {"table": {}, "pixels_per_fwhm": 4.0, "min_resolution": 64, "pixel_samples": 16,
+                  "path_samples": 256},
 }
 
 
@@ -110,6 +113,24 @@ class Settings:
         drop out, and no such tables are built. The double bounce stays tabulated (it is an
         integral per pixel). What it costs and gains is in docs/tradeoff.md. Not with
         ``quality="reference"``.
+    bounces : {1, 2, 3}, optional
+        The most reflections a path of light may make on the mesh (default 1: each pixel's
+        surface reflects straight back). 2 and 3 add the light that reaches the surface a
+        pixel sees after one or two reflections off other parts (a panel against the bus, a
+        dish against its mount: concave corners return light as retro-reflectors, and even
+        bounces keep circular handedness while odd ones flip it). They are traced by Monte
+        Carlo paths in f64 on the CPU for every backend, with ray casting against the mesh
+        (pprender.render module docs; ``RenderResult.by_bounce`` splits the outputs by
+        bounces). A convex or flat mesh traces nothing. The surfaces met along a path are
+        evaluated without the double-bounce term.
+    path_samples : int, optional
+        Paths per pixel with ``bounces`` > 1, in [1, 65536]; given explicitly, it overrides
+        the ``quality`` preset's (4, 16, 64, 256 for fast, balanced, accurate, reference).
+        The noise falls about as ``1 / sqrt(path_samples)``.
+    path_seed : int, optional
+        Seed of the paths' random numbers, in [0, 2**32 - 1] (default 0). They depend on the
+        seed and the pixel only: the same seed gives the same bits, in a batch or one
+        attitude at a time, and a fit sees common random numbers from step to step.
 
     Raises
     ------
@@ -127,8 +148,19 @@ class Settings:
     table: Any = None
     arithmetic: str | None = None
     brdf: str = "table"
+    bounces: int = 1
+    path_samples: int | None = None
+    path_seed: int = 0
 
     def __post_init__(self) -> None:
+        if not _is_int(self.bounces) or not 1 <= self.bounces <= 3:
+            raise Error(f"invalid bounces = {self.bounces!r}: 1, 2 or 3 (the most reflections of a path)")
+        if self.path_samples is not None and (
+            not _is_int(self.path_samples) or not 1 <= self.path_samples <= 65536
+        ):
+            raise Error(f"invalid path_samples = {self.path_samples!r}: paths per pixel, an integer in [1, 65536]")
+        if not _is_int(self.path_seed) or not 0 <= self.path_seed <= 2**32 - 1:
+            raise Error(f"invalid path_seed = {self.path_seed!r}: an integer in [0, 2**32 - 1]")
         if self.brdf not in ("table", "shader"):
             raise Error(f'invalid brdf = {self.brdf!r}: "table" (per-material tables) or "shader" '
                         "(the single, multiple and diffuse terms evaluated per pixel)")
@@ -191,6 +223,12 @@ class Settings:
         if self.pixel_samples is not None:
             return int(self.pixel_samples)
         return int(QUALITY[self.quality]["pixel_samples"])
+
+    def effective_path_samples(self) -> int:
+        """Paths per pixel with ``bounces`` > 1: ``path_samples``, or the quality preset's."""
+        if self.path_samples is not None:
+            return int(self.path_samples)
+        return int(QUALITY[self.quality]["path_samples"])
 
     def effective_arithmetic(self) -> str:
         """``"f64"`` for the twin or the reference, else ``"f32"`` (the device kernel)."""

@@ -36,6 +36,7 @@ pub use coverage::{
 pub use raster::{
     project, project_rotated, rasterize, rotate_vertices, visibility, visibility_at, Projected,
 };
+pub(crate) use shade::{double_angle, telescope_values};
 pub use shade::{shade_pixel, shade_point, Brdf, Framed, PixelSample, Tables};
 pub use shadow::{shadowed, TransmitterView};
 
@@ -337,6 +338,9 @@ pub fn render_cpu_with_progress(
         n_bins: nb,
         pixel_size: lay.pix,
         extent: lay.ext,
+        bounce_image: None,
+        bounce_profile: None,
+        bounce_total: Vec::new(),
         stage_seconds: Vec::new(),
     })
 }

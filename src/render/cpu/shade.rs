@@ -122,14 +122,14 @@ fn any_perp(k: V3) -> V3 {
 }
 
 /// `(cos 2b, sin 2b)` of the angle `b` given by `(cos b, sin b)`.
-fn double_angle(c: f64, s: f64) -> (f64, f64) {
+pub(crate) fn double_angle(c: f64, s: f64) -> (f64, f64) {
     (c * c - s * s, 2.0 * s * c)
 }
 
 /// The sensor's channels ([`SensorSetup::channels`]) of `k L(ao) M L(ai)`, times `s_tx`
 /// for Stokes and intensity outputs, where `L(c, s)` is the Stokes rotation
 /// `[[1,0,0,0],[0,c,s,0],[0,-s,c,0],[0,0,0,1]]` by the double angles `ai`, `ao`.
-fn telescope_values(
+pub(crate) fn telescope_values(
     m: &Mat4,
     ai: (f64, f64),
     ao: (f64, f64),

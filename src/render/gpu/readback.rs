@@ -61,6 +61,9 @@ impl HostOutputs {
             n_bins: lay.n_bins,
             pixel_size: lay.pix * sensor.supersampling as f64,
             extent: lay.ext,
+            bounce_image: None,
+            bounce_profile: None,
+            bounce_total: Vec::new(),
             stage_seconds: Vec::new(),
         }
     }
