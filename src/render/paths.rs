@@ -180,6 +180,53 @@ pub fn has_no_interreflections(mesh: &Mesh) -> bool {
             .all(|(n, a)| vs.iter().all(|&v| dot(n, v - a) <= tol))
 }
 
+/// For each face, whether any vertex of the mesh lies in front of its plane (`[0]`, the side
+/// its winding's normal points to) and behind it (`[1]`), beyond `1e-9` of the bounding
+/// radius: a ray leaving a face on a side with nothing there cannot meet the mesh, so no
+/// path is drawn from it. Computed per flat surface ([`Mesh::surfaces`]: one plane);
+/// where that would take more than about `5e7` vertex tests (a large smooth mesh), every
+/// side is reported open.
+pub fn open_sides(mesh: &Mesh) -> Vec<[bool; 2]> {
+    let surf = mesh.surfaces();
+    let n_surf = surf
+        .iter()
+        .enumerate()
+        .filter(|&(t, &s)| s as usize == t)
+        .count();
+    if n_surf.saturating_mul(mesh.vertices.len()) > 50_000_000 {
+        return vec![[true, true]; mesh.faces.len()];
+    }
+    let tol = 1e-9 * mesh.radius;
+    let vs: Vec<V3> = mesh.vertices.iter().map(|&v| V3::from(v)).collect();
+    let mut by_surface: std::collections::HashMap<u32, [bool; 2]> = Default::default();
+    let mut out = Vec::with_capacity(mesh.faces.len());
+    for t in 0..mesh.faces.len() {
+        let root = surf[t];
+        let sides = *by_surface.entry(root).or_insert_with(|| {
+            let [a, b, c] = mesh.faces[root as usize].map(|k| vs[k as usize]);
+            let n = cross(b - a, c - a);
+            let l = dot(n, n).sqrt();
+            if l <= 0.0 || l.is_nan() {
+                return [true, true];
+            }
+            let n = n / l;
+            let mut sides = [false, false];
+            for &v in &vs {
+                let d = dot(n, v - a);
+                sides[0] |= d > tol;
+                sides[1] |= d < -tol;
+                if sides[0] && sides[1] {
+                    break;
+                }
+            }
+            sides
+        });
+        // a face of a surface shares its plane and orientation (Mesh::surfaces)
+        out.push(sides);
+    }
+    out
+}
+
 /// A 32-bit hash (the PCG output permutation of Jarzynski and Olano 2020).
 #[inline]
 pub fn hash32(v: u32) -> u32 {
@@ -300,6 +347,8 @@ struct Vertex {
 struct Posed<'a> {
     mesh: &'a Mesh,
     rot: &'a Rot,
+    /// [`open_sides`] of the mesh.
+    open: &'a [[bool; 2]],
     tris: Vec<[V3; 3]>,
     bvh: Bvh,
     /// Ray origins leave a surface by this much along its normal (m).
@@ -307,7 +356,7 @@ struct Posed<'a> {
 }
 
 impl<'a> Posed<'a> {
-    fn new(mesh: &'a Mesh, rot: &'a Rot) -> Self {
+    fn new(mesh: &'a Mesh, rot: &'a Rot, open: &'a [[bool; 2]]) -> Self {
         let vs: Vec<V3> = mesh
             .vertices
             .iter()
@@ -322,6 +371,7 @@ impl<'a> Posed<'a> {
         Posed {
             mesh,
             rot,
+            open,
             tris,
             bvh,
             eps: 1e-9 * mesh.radius,
@@ -362,6 +412,13 @@ impl<'a> Posed<'a> {
             mat: self.mesh.face_material[hit.tri] as usize,
             tri: hit.tri,
         })
+    }
+
+    /// Whether anything of the mesh lies on the side of `v`'s face that `v.ng` points to.
+    fn side_open(&self, v: &Vertex) -> bool {
+        let [a, b, c] = self.tris[v.tri];
+        let front = dot(v.ng, cross(b - a, c - a)) > 0.0;
+        self.open[v.tri][if front { 0 } else { 1 }]
     }
 
     /// Whether `v` sees the transmitter (toward unit `wi`) past the rest of the mesh.
@@ -664,6 +721,9 @@ fn render_rows(
                 let mut length = -dot(v1.p, wo);
                 let (mut v, mut w_out) = (v1, wo);
                 for order in 0..orders {
+                    if !posed.side_open(&v) {
+                        break;
+                    }
                     // draw the direction toward the next surface at `v`
                     let c = dot(v.n, w_out);
                     let s = cross(v.n, w_out);
@@ -804,7 +864,7 @@ fn render_tx_rows(
                     continue;
                 };
                 let c2 = dot(v2.n, wi);
-                if c2 <= 0.0 {
+                if c2 <= 0.0 || !posed.side_open(&v2) {
                     continue;
                 }
                 let s2 = cross(v2.n, wi);
@@ -947,6 +1007,7 @@ pub fn render_paths_with(
     };
     let (w, ch, nb) = (setup.width, setup.ch, lay.n_bins);
     let skip = orders == 0 || has_no_interreflections(mesh);
+    let open = if skip { Vec::new() } else { open_sides(mesh) };
     let blocks: Vec<std::ops::Range<usize>> = (0..w)
         .step_by(ROWS_PER_BLOCK)
         .map(|r| r..(r + ROWS_PER_BLOCK).min(w))
@@ -970,7 +1031,7 @@ pub fn render_paths_with(
         if skip || cancelled.load(Relaxed) {
             return sums;
         }
-        let posed = Posed::new(mesh, rot);
+        let posed = Posed::new(mesh, rot, &open);
         let seen = covered_pixels(&posed.tris, V3::X, V3::Y, w, lay.ext);
         let parts: Vec<PathSums> = blocks
             .par_iter()
