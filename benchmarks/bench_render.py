@@ -206,8 +206,11 @@ def interreflection_rows(device: str, repeats: int) -> list[str]:
         return pprender.Lidar(resolution=RES, pixel_samples=8, polarization=[1, 1, 0, 0], bounces=bounces,
                               path_samples=paths, arithmetic=arithmetic)
 
-    refs = {b: pprender.render(scene, lidar(b, 1024, "f64"), q, outputs=("profile",)).profile
-            for b in (2, 3)}
+    refs: dict[int, np.ndarray] = {}
+    for b in (2, 3):
+        ref = pprender.render(scene, lidar(b, 1024, "f64"), q, outputs=("profile",)).profile
+        assert ref is not None
+        refs[b] = ref
     out = ["Inter-reflections (module docstring: `balanced` sampling, batch of 8, Stokes profile only):", "",
            "| backend | bounces | paths per pixel | realizations/s (best) | cost vs bounces=1 | profile noise |",
            "| --- | ---: | ---: | ---: | ---: | ---: |"]
@@ -219,6 +222,7 @@ def interreflection_rows(device: str, repeats: int) -> list[str]:
             best, _ = best_time(lambda: pprender.render(scene, sensor, q, outputs=("profile",), device=device),
                                 repeats)
             r = pprender.render(scene, sensor, q, outputs=("profile",), device=device)
+            assert r.profile is not None
             base = best if base is None else base
             noise = "" if bounces == 1 else f"{profile_noise(r.profile[..., 0], refs[bounces][..., 0]):.4f}"
             shown = "" if bounces == 1 else str(paths)

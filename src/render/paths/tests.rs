@@ -122,6 +122,7 @@ fn lambertian_dihedral_second_bounce_equals_the_view_factor_formula() {
     let strategies = [(true, false), (false, true), (true, true)].map(|(r, t)| Strategies {
         receiver: r,
         transmitter: t,
+        aim: true,
     });
     for (t_deg, st) in [0.0f64, 20.0]
         .into_iter()
@@ -406,7 +407,10 @@ fn path_uniforms_are_an_even_lattice_per_pixel() {
 fn closed_sides_let_no_ray_meet_the_mesh() {
     let dih = dihedral(0.3);
     let open = open_sides(&dih);
-    assert!(open.iter().all(|s| s.iter().filter(|&&o| o).count() == 1), "{open:?}");
+    assert!(
+        open.iter().all(|s| s.iter().filter(|&&o| o).count() == 1),
+        "{open:?}"
+    );
     let sphere = crate::render::test_scenes::uv_sphere(0.5, 8, 16);
     assert!(open_sides(&sphere).iter().all(|s| !s[0] && s[1]));
     let mut state = 0x2545_f491_4f6c_dd1du64;
@@ -435,7 +439,10 @@ fn closed_sides_let_no_ray_meet_the_mesh() {
                     let p = tri[0] + a * (tri[1] - tri[0]) + b * (tri[2] - tri[0]);
                     let d = normalize(V3::new(rand() - 0.5, rand() - 0.5, rand() - 0.5));
                     let d = if dot(d, wn) * sign > 0.0 { d } else { -d };
-                    let hit = posed.bvh.any_hit(p + 1e-9 * sign * wn, d, 0.0, f64::INFINITY, Some(t));
+                    let hit =
+                        posed
+                            .bvh
+                            .any_hit(p + 1e-9 * sign * wn, d, 0.0, f64::INFINITY, Some(t));
                     assert!(!hit, "face {t} side {side}: a ray met the mesh");
                     closed_checked += 1;
                 }
@@ -443,4 +450,71 @@ fn closed_sides_let_no_ray_meet_the_mesh() {
         }
         assert!(closed_checked >= 80, "{closed_checked}");
     }
+}
+
+/// The bus-and-paint corner: a glossy conductor plate (Beckmann alpha 0.1) at 90 degrees to
+/// a Lambertian one. Its 3-bounce light is mostly glossy -> diffuse -> glossy (the metal
+/// shows the paint it lights), which either end draws poorly; aiming from the middle
+/// surface at the transmitter's mirror ([`Mirrors`]) gives the same mean (within 4
+/// standard errors over 6 seeds each) with less than half the standard deviation (measured:
+/// 0.1019 +- 0.0007 aimed, 0.108 +- 0.016 not).
+#[test]
+fn aiming_at_mirrors_keeps_the_third_bounce_and_cuts_its_noise() {
+    let mesh = dihedral(0.3);
+    let mut metal = MaterialSpec::new(Distribution::Beckmann { alpha: 0.1 }, Eta::PerfectConductor);
+    metal.terms = Terms {
+        single: true,
+        double: false,
+        multiple: false,
+        diffuse: false,
+    };
+    let mut paint = MaterialSpec::new(
+        Distribution::Beckmann { alpha: 0.3 },
+        Eta::Complex(crate::optics::fresnel::C64::new(1.0, 0.0)),
+    );
+    paint.terms = Terms {
+        single: false,
+        double: false,
+        multiple: false,
+        diffuse: true,
+    };
+    paint.diffuse_albedo = 0.8;
+    let mats = vec![
+        Arc::new(Material::new(metal).unwrap()),
+        Arc::new(Material::new(paint).unwrap()),
+    ];
+    let rot = [view(15f64.to_radians(), 0.4)];
+    let third = |aim: bool| -> Vec<f64> {
+        (0..6)
+            .map(|seed| {
+                let st = Strategies {
+                    aim,
+                    ..Strategies::default()
+                };
+                let s = render_paths_with(
+                    &mesh,
+                    &sensor_with(32, 3, 16, seed),
+                    &rot,
+                    ALL,
+                    &Materials(&mats),
+                    None,
+                    (0, 1),
+                    st,
+                )
+                .unwrap();
+                s[0].total[16]
+            })
+            .collect()
+    };
+    let stats = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64;
+        (m, var.sqrt())
+    };
+    let (with, without) = (third(true), third(false));
+    let ((m1, s1), (m0, s0)) = (stats(&with), stats(&without));
+    assert!(m1 > 0.0 && m0 > 0.0);
+    let se = (s1 * s1 / 6.0 + s0 * s0 / 6.0).sqrt();
+    assert!((m1 - m0).abs() < 4.0 * se, "{with:?} vs {without:?}");
+    assert!(s1 < 0.5 * s0, "std {s1} with aiming, {s0} without");
 }
