@@ -215,3 +215,13 @@ def test_a_database_of_inter_reflections_records_its_settings(tmp_path):
         database.build_database(tmp_path / "d.zarr", {"corner": mesh}, {"al": aluminium(0.3)}, q,
                                 pprender.Lidar(resolution=24, bounces=2, path_samples=8,
                                                polarization=[1, 0, 0, 0]), progress=False)
+
+
+def test_paths_that_would_not_fit_in_memory_are_refused():
+    """Images split by bounces for thousands of large attitudes would exhaust the memory
+    (an allocation failure aborts the process): refused up front, naming bounces and the
+    memory needed, before anything renders."""
+    sc = pprender.Scene(mc.dihedral(), aluminium(0.3))
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (3000, 1))
+    with pytest.raises(pprender.Error, match=r"bounces.*GiB"):
+        pprender.render(sc, pprender.Lidar(resolution=4096, bounces=2), q, outputs=("mueller",))

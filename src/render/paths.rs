@@ -1342,6 +1342,58 @@ pub fn render_paths_with(
     Ok(sums)
 }
 
+/// Bytes [`render_paths`] and [`add_paths`] hold at their peak for `n` attitudes: the
+/// attitudes traced at once (one per thread) with their image and profile sums in f64 and
+/// the row blocks' sums, and every attitude's sums and split outputs.
+pub fn paths_bytes(mesh: &Mesh, sensor: &SensorSetup, n: usize, outputs: Outputs) -> usize {
+    let orders = sensor.paths.bounces.saturating_sub(1);
+    if orders == 0 {
+        return 0;
+    }
+    let lay = Layout::new(mesh, sensor);
+    let (w, ch) = (sensor.resolution, sensor.channels());
+    let image = if outputs.image { w * w * ch } else { 0 };
+    let profile = if outputs.profile { lay.n_bins * ch } else { 0 };
+    // per attitude: its sums (f64) and the blocks' copies while they are joined
+    let one = orders * (image + profile) * 8 * 2;
+    let at_once = rayon::current_num_threads().max(1).min(n);
+    // kept for every attitude: the sums (f64) and the split outputs (f32 images, f64 profiles)
+    let kept = n.saturating_mul(
+        orders * (image * 8 + profile * 8) + (orders + 1) * (image * 4 + profile * 8),
+    );
+    at_once.saturating_mul(one).saturating_add(kept)
+}
+
+/// Refuse inter-reflections that would not fit in the memory available (an allocation
+/// failure aborts the process), naming the memory needed.
+pub fn check_paths_memory(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    n: usize,
+    outputs: Outputs,
+) -> Result<()> {
+    let need = paths_bytes(mesh, sensor, n, outputs);
+    if let Some(avail) = super::cpu::available_memory() {
+        if need > avail {
+            const GIB: f64 = (1u64 << 30) as f64;
+            return Err(Error::param(
+                "bounces",
+                sensor.paths.bounces,
+                format!(
+                    "the inter-reflections of this render ({n} attitude(s), {w} x {w} pixels) \
+                     need about {:.1} GiB of memory beside the render and {:.1} GiB are \
+                     available: render fewer attitudes per call, request fewer outputs (images \
+                     split by bounces are the largest), or lower the resolution",
+                    need as f64 / GIB,
+                    avail as f64 / GIB,
+                    w = sensor.resolution,
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Add the paths of each attitude (`sums`, from [`render_paths`]) to a backend's
 /// one-bounce result, and split the outputs by bounces (`bounce_*` of [`Rendered`]: the
 /// backend's values first, then each order's).

@@ -58,6 +58,7 @@ pub fn render(
         table_options,
     } = *request;
     gpu::check_batch(rotations)?;
+    paths::check_paths_memory(mesh, sensor, rotations.len(), outputs)?;
     let beta = sensor.bistatic_angle;
     // with inter-reflections the backend's pass is the first half of the progress
     let with_paths = sensor.paths.bounces > 1;

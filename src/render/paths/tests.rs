@@ -518,3 +518,29 @@ fn aiming_at_mirrors_keeps_the_third_bounce_and_cuts_its_noise() {
     assert!((m1 - m0).abs() < 4.0 * se, "{with:?} vs {without:?}");
     assert!(s1 < 0.5 * s0, "std {s1} with aiming, {s0} without");
 }
+
+/// The memory estimate grows with what is kept (images split by bounces dominate) and is
+/// zero with one bounce; a render that would need more than the machine has is refused
+/// with the parameter named.
+#[test]
+fn paths_memory_is_estimated_and_checked() {
+    let mesh = dihedral(0.3);
+    let mut s = sensor_with(64, 3, 4, 0);
+    let prof = Outputs {
+        image: false,
+        range: false,
+        profile: true,
+    };
+    let small = paths_bytes(&mesh, &s, 10, prof);
+    let big = paths_bytes(&mesh, &s, 10, ALL);
+    // the images: 2 orders x 64^2 pixels x 16 channels, f64 sums and f32 outputs
+    assert!(big - small >= 10 * (2 * 64 * 64 * 16 * 8 + 3 * 64 * 64 * 16 * 4));
+    assert!(check_paths_memory(&mesh, &s, 10, ALL).is_ok());
+    s.resolution = 8192;
+    let e = check_paths_memory(&mesh, &s, 100_000, ALL)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("bounces") && e.contains("GiB"), "{e}");
+    s.paths.bounces = 1;
+    assert_eq!(paths_bytes(&mesh, &s, 100_000, ALL), 0);
+}
