@@ -75,9 +75,13 @@ class Settings:
         pixel's 3x3 neighbourhood, and their edge neighbours on the mesh), and each one's
         visible part of the pixel is computed exactly by clipping the triangles to the pixel
         in depth order; each is shaded once at the centroid of its part. Edges then cost no
-        more samples: coverage is exact to f32 rounding wherever at most 32 triangles overlap
-        a pixel (else, at a vertex shared by dozens of triangles, the pixel falls back to its
-        centre sample). Needs ``pixel_samples`` 1 (or unset).
+        more samples: coverage is exact to f32 rounding for the triangles found, wherever at
+        most 32 triangles overlap a pixel (else, at a vertex shared by dozens of triangles,
+        the pixel falls back to its centre sample). Parts narrower than a pixel are found
+        only where a nearby pixel centre sees them: a thin wire or a plate's rim nearly
+        parallel to an image axis can fall between the centres and be partly missed (its
+        return too low by several percent); the sampled coverage does not have this limit.
+        Needs ``pixel_samples`` 1 (or unset).
     quality : {"fast", "balanced", "accurate", "reference"}, optional
         The speed/accuracy dial (:data:`QUALITY`; docs/tradeoff.md measures each):
         ``"fast"`` (coarse BRDF tables, pixels half the range FWHM across), ``"balanced"``

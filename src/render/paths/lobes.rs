@@ -1,0 +1,143 @@
+//! The lobes a path draws its directions from at a surface: the BRDF the path sampler
+//! evaluates and samples ([`PathBrdf`], the scene's [`Materials`]), the mixture of the
+//! specular lobe (normals from the distribution) and the cosine-weighted depolarizing lobe,
+//! and its density.
+
+use super::*;
+
+/// The least probability of each lobe where a material has both.
+pub const MIN_LOBE_P: f64 = 0.1;
+
+/// The lobes to sample at a surface: the specular lobe's distribution of normals (if any)
+/// and the probability of choosing it (the rest: the cosine-weighted depolarizing lobe).
+#[derive(Debug, Clone, Copy)]
+pub struct Lobes {
+    pub specular: Option<Distribution>,
+    pub p_specular: f64,
+}
+
+/// A BRDF the path sampler evaluates and samples.
+pub trait PathBrdf: Sync {
+    /// Material `mat`'s Mueller BRDF at unit shading normal `n` for unit `wi`, `wo` above
+    /// it (world frame), all elements, with its bases ([`Framed`]).
+    fn eval(&self, mat: usize, n: V3, wi: V3, wo: V3) -> Framed;
+    /// The lobes of `mat` toward `w_out` at `cos(theta) = cos_o`, `sin(theta) = sin_o`
+    /// about the normal; `None` where it reflects nothing.
+    fn lobes(&self, mat: usize, cos_o: f64, sin_o: f64) -> Option<Lobes>;
+}
+
+/// The scene's materials as the path sampler sees them (module docs: single + multiple +
+/// diffuse terms; the specular lobe's weight the white single-bounce albedo times the
+/// normal-incidence Fresnel reflectance, the depolarizing lobe's its albedo).
+pub struct Materials<'a>(pub &'a [Arc<Material>]);
+
+impl PathBrdf for Materials<'_> {
+    fn eval(&self, mat: usize, n: V3, wi: V3, wo: V3) -> Framed {
+        let mats = self.0;
+        let f = |m: usize, a: V3, b: V3| {
+            sum_terms_except(&mats[m], a, b, Frame::Sp, Some(Term::Double))
+        };
+        f.eval_framed(mat, n, wi, wo, 0xffff)
+    }
+
+    fn lobes(&self, mat: usize, cos_o: f64, sin_o: f64) -> Option<Lobes> {
+        let m = &self.0[mat];
+        let terms = m.spec.terms;
+        let w_spec = if terms.single {
+            let (rs, rp) = fresnel_amplitudes(1.0, m.spec.eta);
+            let r0 = 0.5 * (rs.norm_sqr() + rp.norm_sqr());
+            m.white_albedo(cos_o, sin_o).unwrap_or(1.0) * r0
+        } else {
+            0.0
+        };
+        let w_dep = if terms.multiple || terms.diffuse {
+            let (ms, d) = m.depolarizing_albedo(cos_o, sin_o);
+            ms + d
+        } else {
+            0.0
+        };
+        lobes_from_weights(m.spec.distribution, w_spec, w_dep)
+    }
+}
+
+/// [`Lobes`] from the two lobes' weights (probabilities kept within
+/// `[MIN_LOBE_P, 1 - MIN_LOBE_P]` where both lobes exist).
+pub fn lobes_from_weights(dist: Distribution, w_spec: f64, w_dep: f64) -> Option<Lobes> {
+    let (s, d) = (w_spec.max(0.0), w_dep.max(0.0));
+    if s + d <= 0.0 || (s + d).is_nan() {
+        return None;
+    }
+    if d == 0.0 {
+        return Some(Lobes {
+            specular: Some(dist),
+            p_specular: 1.0,
+        });
+    }
+    if s == 0.0 {
+        return Some(Lobes {
+            specular: None,
+            p_specular: 0.0,
+        });
+    }
+    Some(Lobes {
+        specular: Some(dist),
+        p_specular: (s / (s + d)).clamp(MIN_LOBE_P, 1.0 - MIN_LOBE_P),
+    })
+}
+
+/// A unit vector normal to unit `n`, and a second one completing a right-handed frame.
+pub(super) fn tangents(n: V3) -> (V3, V3) {
+    let a = if n.x.abs() < 0.9 { V3::X } else { V3::Y };
+    let t1 = normalize(cross(a, n));
+    (t1, cross(n, t1))
+}
+
+/// The density (1/sr) of drawing `w` at a surface with shading normal `n` toward `w_out`.
+pub(super) fn pdf(lobes: &Lobes, n: V3, w_out: V3, w: V3) -> f64 {
+    let c = dot(n, w);
+    if c <= 0.0 {
+        return 0.0;
+    }
+    let mut p = (1.0 - lobes.p_specular) * c / PI;
+    if let Some(dist) = lobes.specular {
+        let h = w + w_out;
+        let l = dot(h, h).sqrt();
+        if l > 0.0 {
+            let h = h / l;
+            let ch = dot(h, n);
+            let wh = dot(w_out, h);
+            if ch > 0.0 && wh > 0.0 {
+                let nxh = cross(n, h);
+                let d = dist.d(ch, dot(nxh, nxh).min(1.0));
+                p += lobes.p_specular * d * ch / (4.0 * wh);
+            }
+        }
+    }
+    p
+}
+
+/// A direction drawn at a surface with shading normal `n` toward `w_out` from the
+/// uniforms `(u_lobe, u1, u2)`; `None` when the draw falls below the horizon.
+pub(super) fn sample(lobes: &Lobes, n: V3, w_out: V3, u: [f64; 3]) -> Option<V3> {
+    let (t1, t2) = tangents(n);
+    let phi = 2.0 * PI * u[2];
+    let (sp, cp) = phi.sin_cos();
+    let w = match lobes.specular {
+        Some(dist) if u[0] < lobes.p_specular => {
+            let (ch, s2h) = dist.sample_theta(u[1]);
+            let sh = s2h.max(0.0).sqrt();
+            let h = sh * cp * t1 + sh * sp * t2 + ch * n;
+            let wh = dot(w_out, h);
+            if wh <= 0.0 {
+                return None;
+            }
+            2.0 * wh * h - w_out
+        }
+        _ => {
+            let r = u[1].sqrt();
+            let z = (1.0 - u[1]).max(0.0).sqrt();
+            r * cp * t1 + r * sp * t2 + z * n
+        }
+    };
+    (dot(w, n) > 0.0).then_some(w)
+}

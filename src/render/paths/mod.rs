@@ -1,0 +1,512 @@
+//! Inter-reflections between the parts of a mesh: the light that reaches a pixel's surface
+//! after one or two reflections off other surfaces (paths of 2 and 3 bounces), by Monte
+//! Carlo path sampling in f64 on the CPU with ray casting against the mesh ([`Bvh`]). The
+//! single bounce stays with the backend's renderer; [`crate::render::request::render`]
+//! adds these paths to its outputs for every backend. Conventions: [`crate::render`].
+//!
+//! # The estimator
+//!
+//! A path of `k` bounces: the receiver sees `p1` (the first surface along `-Z` through a
+//! point of the pixel), light reached `p1` from `p2` along `w1` (unit, from `p1` toward
+//! `p2`), ..., and `pk` is lit by the transmitter (toward `wi`, not shadowed). The pixel's
+//! differential cross-section from such paths is
+//!
+//! `dsigma_k = 4 pi delta^2 E[ M1(w1, wo) cos1 / pdf1 ... Mk(wi, -w_{k-1}) cos_i(pk) ]`
+//!
+//! with `p1` uniform over the pixel's area (projected along `wo`), each `w_j` drawn with
+//! density `pdf_j` at `p_j`, `M_j(in, out)` the Mueller BRDF of `p_j`'s material (1/sr)
+//! and `cos_j = n_j . w_j` (shading normals). One bounce (`w` replaced by `wi` at `p1`) is
+//! the renderer's `4 pi f cos(theta_i) delta^2`. The Mueller matrices are composed in
+//! their own Stokes bases, rotated into each other for the beam between consecutive
+//! surfaces (the beam `p_{j+1} -> p_j` is the input of `M_j` and the output of `M_{j+1}`),
+//! and the path's first input and last output into the telescope's bases.
+//!
+//! **Sampling.** At each surface the next direction is drawn from a mixture of the
+//! material's lobes: the specular lobe through the distribution of normals (`h` with
+//! density `D(h) cos(theta_h)` about the shading normal, `w = reflect(w_out, h)`, pdf
+//! `D cos(theta_h) / (4 |w_out . h|)`: Walter et al. 2007) and the depolarizing lobe
+//! (multiple scattering + diffuse) by cosine-weighted directions, chosen with probabilities
+//! in proportion to their albedos at `w_out` (at least [`MIN_LOBE_P`] each when both
+//! exist); the pdf is the mixture's (the balance heuristic between the lobes). The last
+//! segment, to the transmitter, is fixed (a plane wave): each surface of the path is
+//! connected to `wi` with a shadow ray (next-event estimation), and the path goes on from
+//! there for the next order. Directions below a surface's geometric or shading horizon
+//! carry nothing.
+//!
+//! **Random numbers.** A pixel's `N` paths use scrambled Sobol' points ([`uniforms`]:
+//! three sets, shuffled and Owen-scrambled by hashes of `(seed, pixel, set)`, Burley
+//! 2020), stratified in each dimension and jointly in the pairs that draw a point or a
+//! direction. They depend on the seed and the pixel only, not on the attitude
+//! or its place in the batch: a batch equals single calls bit for bit, and a fit that moves
+//! the attitude sees common random numbers (its objective does not jitter from step to
+//! step).
+//!
+//! **What a surface along a path is evaluated with.** Its material's single, multiple and
+//! diffuse terms ([`crate::brdf::terms::sum_terms_except`] without the double bounce: its
+//! quadrature per path vertex costs more than the path); the one-bounce return, with the
+//! double bounce, is the backend's.
+//!
+//! **Range.** A path lands at half its extra round-trip length,
+//! `r = (-pk . wi + sum |p_{j+1} - p_j| - p1 . wo) / 2` (one bounce: `-p . (wi + wo) / 2`);
+//! it adds to the profile as a
+//! point (the pulse alone, no pixel footprint), to the image at the pixel it is seen in,
+//! and not to the range map (the range of the first surface).
+//!
+//! **Convex meshes.** A closed mesh that is convex, or a flat one, has no inter-reflections:
+//! [`has_no_interreflections`] says so and no path is traced.
+
+pub use super::api::{check_paths, PathSetup, MAX_BOUNCES, MAX_PATH_SAMPLES};
+use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
+use super::bvh::Bvh;
+use super::cpu::{Brdf, Framed};
+use super::geometry::{rotate, Mesh, Rot};
+use super::pulse;
+use crate::brdf::spec::Term;
+use crate::brdf::terms::sum_terms_except;
+use crate::brdf::Material;
+use crate::error::{Error, Result};
+use crate::microfacet::distribution::Distribution;
+use crate::optics::frames::{cross, dot, normalize, Frame, V3};
+use crate::optics::fresnel::fresnel_amplitudes;
+use crate::optics::mueller::Mat4;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+mod lobes;
+mod mirrors;
+mod posed;
+mod receiver;
+mod rng;
+mod transmitter;
+
+pub use lobes::{lobes_from_weights, Lobes, Materials, PathBrdf, MIN_LOBE_P};
+use lobes::{pdf, sample, tangents};
+use mirrors::{aim, Mirrors};
+use posed::{covered_pixels, surface_areas, Posed, Vertex};
+pub use posed::{has_no_interreflections, open_sides};
+use receiver::render_rows;
+pub use rng::{hash32, uniforms, PixelRng, DIMS};
+#[cfg(test)]
+use rng::{sobol, sobol_directions};
+use transmitter::{render_tx_rows, TxSums};
+
+fn mat_mul(a: &Mat4, b: &Mat4) -> Mat4 {
+    let mut m = [[0.0; 4]; 4];
+    for i in 0..4 {
+        for k in 0..4 {
+            let aik = a[i][k];
+            if aik != 0.0 {
+                for j in 0..4 {
+                    m[i][j] += aik * b[k][j];
+                }
+            }
+        }
+    }
+    m
+}
+
+/// `m L(c, s)` for the Stokes rotation `L = [[1,0,0,0],[0,c,s,0],[0,-s,c,0],[0,0,0,1]]`.
+fn mul_rotation(m: &Mat4, (c, s): (f64, f64)) -> Mat4 {
+    let mut t = *m;
+    for row in t.iter_mut() {
+        let (a1, a2) = (row[1], row[2]);
+        row[1] = a1 * c - a2 * s;
+        row[2] = a1 * s + a2 * c;
+    }
+    t
+}
+
+/// The Stokes rotation (double angles) taking a beam's Stokes vector in the basis `x_b`
+/// (`y_b = k x x_b`, `k` the propagation direction) to the basis `x_a`:
+/// `S_a = L(x_a . x_b, x_a . y_b) S_b` (as `shade_at` turns the telescope's bases).
+fn basis_change(x_a: V3, x_b: V3, k: V3) -> (f64, f64) {
+    let y_b = cross(k, x_b);
+    super::cpu::double_angle(dot(x_a, x_b), dot(x_a, y_b))
+}
+
+/// What the paths of one attitude add: per order `k = 2..=bounces` (index `k - 2`) the
+/// image (pixels, channels), the profile (bins, channels) and the total (channels).
+#[derive(Debug, Clone, Default)]
+pub struct PathSums {
+    pub image: Vec<f64>,
+    pub profile: Vec<f64>,
+    pub total: Vec<f64>,
+}
+
+/// What the sensor's set-up gives every path of a render.
+struct Setup<'a> {
+    sensor: &'a SensorSetup,
+    lay: Layout,
+    /// Output pixels per side and their size (m).
+    width: usize,
+    pix: f64,
+    wi: V3,
+    wo: V3,
+    x_in_t: V3,
+    y_in_t: V3,
+    edges: Vec<f64>,
+    ch: usize,
+    orders: usize,
+    strategies: Strategies,
+    /// The transmitter's image plane: unit `tx_u`, `tx_v` normal to `wi` (`= X`, `Y`
+    /// monostatic), spanning the same square as the receiver's.
+    tx_u: V3,
+    tx_v: V3,
+}
+
+/// Which sampling strategies draw the 2-bounce paths: from the receiver's side (a point of
+/// the pixel, a direction from its surface's lobes, next-event toward the transmitter) and
+/// from the transmitter's (a point of the transmitter's view, a direction from its
+/// surface's lobes, a connection to the receiver), combined by the balance heuristic when
+/// both are on (the default; one alone is for tests: each must be unbiased by itself).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Strategies {
+    pub receiver: bool,
+    pub transmitter: bool,
+    /// 3-bounce paths also aimed from their middle surface at the glossy flat surfaces
+    /// that mirror the transmitter (`mirrors::Mirrors`).
+    pub aim: bool,
+}
+
+impl Default for Strategies {
+    fn default() -> Self {
+        Strategies {
+            receiver: true,
+            transmitter: true,
+            aim: true,
+        }
+    }
+}
+
+/// The transmitter strategy's density of drawing, at the lit surface `v`, the direction
+/// `w` toward the seen one (per unit solid angle), times `|ng . wi|` (the transmitter's
+/// projected area to `v`'s area): the part of its density in the balance heuristic that
+/// is not shared with the receiver's.
+fn transmitter_density(brdf: &(impl PathBrdf + ?Sized), v: &Vertex, wi: V3, w: V3) -> f64 {
+    let c = dot(v.n, wi);
+    let s = cross(v.n, wi);
+    match brdf.lobes(v.mat, c, dot(s, s).sqrt()) {
+        Some(lobes) => pdf(&lobes, v.n, wi, w) * dot(v.ng, wi).abs(),
+        None => 0.0,
+    }
+}
+
+/// The receiver strategy's counterpart of [`transmitter_density`]: the density of drawing,
+/// at the seen surface `v`, the direction `w` toward the lit one, times `|ng . wo|`.
+fn receiver_density(brdf: &(impl PathBrdf + ?Sized), v: &Vertex, wo: V3, w: V3) -> f64 {
+    let c = dot(v.n, wo);
+    let s = cross(v.n, wo);
+    match brdf.lobes(v.mat, c, dot(s, s).sqrt()) {
+        Some(lobes) => pdf(&lobes, v.n, wo, w) * dot(v.ng, wo).abs(),
+        None => 0.0,
+    }
+}
+
+impl Setup<'_> {
+    /// Add `vals` (channels) at range `r` to a profile (bins x channels): the pulse's
+    /// weights over the bins it reaches, its tails folded into the end ones (as
+    /// [`pulse::bin_weights_folded`] for a point).
+    fn deposit(&self, prof: &mut [f64], vals: &[f64], r: f64) {
+        let (ch, nb) = (self.ch, self.lay.n_bins);
+        let (r_min, bw, half) = (self.lay.r_min, self.sensor.bin_width, self.lay.support);
+        let bin = |x: f64| (((x - r_min) / bw).floor().clamp(0.0, (nb - 1) as f64)) as usize;
+        let (k0, k1) = (bin(r - half), bin(r + half));
+        let mut prev = 0.0;
+        for k in k0..=k1 {
+            let c = if k < k1 {
+                let x = self.edges[k + 1] - r;
+                match &self.sensor.pulse {
+                    Some(p) => p.cdf_box2(x, 0.0, 0.0),
+                    None => pulse::cdf_gauss_box2(x, self.sensor.sigma_range, 0.0, 0.0),
+                }
+            } else {
+                1.0
+            };
+            let wt = c - prev;
+            prev = c;
+            if wt != 0.0 {
+                for (p, v) in prof[k * ch..(k + 1) * ch].iter_mut().zip(vals) {
+                    *p += wt * v;
+                }
+            }
+        }
+    }
+
+    /// The telescope's channels of the path matrix `m` whose input is in the basis `x_in`
+    /// (normal to `wi`) and output in `x_out` (normal to `wo`), times `k`.
+    fn channels(&self, m: &Mat4, x_in: V3, x_out: V3, k: f64) -> [f64; 16] {
+        let ai = super::cpu::double_angle(dot(x_in, self.x_in_t), dot(x_in, self.y_in_t));
+        let y_out = cross(self.wo, x_out);
+        let ao = super::cpu::double_angle(x_out[0], y_out[0]);
+        super::cpu::telescope_values(m, ai, ao, k, self.sensor)
+    }
+}
+
+/// Rows of the image per block of work (blocks are summed in order: the same bits on any
+/// number of threads).
+const ROWS_PER_BLOCK: usize = 4;
+
+/// The paths of 2 to `sensor.paths.bounces` bounces of each attitude ([`PathSums`], in the
+/// order of `rotations`), at the sensor's output resolution (`resolution` pixels per side;
+/// supersampling does not apply: each path draws its own point of the pixel).
+/// `progress` is told after each attitude (`(done, total)` offset by `progress_offset`).
+pub fn render_paths(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &(impl PathBrdf + ?Sized),
+    progress: Progress,
+    progress_offset: (usize, usize),
+) -> Result<Vec<PathSums>> {
+    render_paths_with(
+        mesh,
+        sensor,
+        rotations,
+        outputs,
+        brdf,
+        progress,
+        progress_offset,
+        Strategies::default(),
+    )
+}
+
+/// [`render_paths`] with the 2-bounce sampling strategies chosen ([`Strategies`]).
+#[allow(clippy::too_many_arguments)]
+pub fn render_paths_with(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &(impl PathBrdf + ?Sized),
+    progress: Progress,
+    progress_offset: (usize, usize),
+    strategies: Strategies,
+) -> Result<Vec<PathSums>> {
+    let lay = Layout::new(mesh, sensor);
+    let orders = sensor.paths.bounces.saturating_sub(1);
+    let beta = sensor.bistatic_angle;
+    let wi = V3::new(beta.sin(), 0.0, beta.cos());
+    let k_in = -wi;
+    let x_in_t = normalize(cross(k_in, V3::Y));
+    let setup = Setup {
+        sensor,
+        lay,
+        width: sensor.resolution,
+        pix: 2.0 * lay.ext / sensor.resolution as f64,
+        wi,
+        wo: V3::Z,
+        x_in_t,
+        y_in_t: cross(k_in, x_in_t),
+        edges: (0..=lay.n_bins)
+            .map(|k| lay.r_min + k as f64 * sensor.bin_width)
+            .collect(),
+        ch: sensor.channels(),
+        orders,
+        strategies,
+        tx_u: normalize(cross(V3::Y, wi)),
+        tx_v: cross(wi, normalize(cross(V3::Y, wi))),
+    };
+    let (w, ch, nb) = (setup.width, setup.ch, lay.n_bins);
+    let skip = orders == 0 || has_no_interreflections(mesh);
+    let open = if skip { Vec::new() } else { open_sides(mesh) };
+    let areas = if skip {
+        Vec::new()
+    } else {
+        surface_areas(mesh)
+    };
+    let blocks: Vec<std::ops::Range<usize>> = (0..w)
+        .step_by(ROWS_PER_BLOCK)
+        .map(|r| r..(r + ROWS_PER_BLOCK).min(w))
+        .collect();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let cancelled = std::sync::atomic::AtomicBool::new(false);
+    let one = |rot: &Rot| -> PathSums {
+        use std::sync::atomic::Ordering::Relaxed;
+        let mut sums = PathSums {
+            image: vec![
+                0.0;
+                if outputs.image {
+                    orders * w * w * ch
+                } else {
+                    0
+                }
+            ],
+            profile: vec![0.0; if outputs.profile { orders * nb * ch } else { 0 }],
+            total: vec![0.0; orders * ch],
+        };
+        if skip || cancelled.load(Relaxed) {
+            return sums;
+        }
+        let posed = Posed::new(mesh, rot, &open);
+        let seen = covered_pixels(&posed.tris, V3::X, V3::Y, w, lay.ext);
+        let mirrors = if strategies.aim && orders >= 2 {
+            Mirrors::new(&posed, brdf, wi, &areas)
+        } else {
+            Mirrors::none(mesh.faces.len())
+        };
+        let parts: Vec<PathSums> = blocks
+            .par_iter()
+            .map(|r| render_rows(&setup, &posed, brdf, r.clone(), outputs, &seen, &mirrors))
+            .collect();
+        for (r, part) in blocks.iter().zip(parts) {
+            if outputs.image {
+                let n_rows = r.len();
+                for order in 0..orders {
+                    let src = &part.image[order * n_rows * w * ch..(order + 1) * n_rows * w * ch];
+                    let at = (order * w + r.start) * w * ch;
+                    sums.image[at..at + src.len()].copy_from_slice(src);
+                }
+            }
+            for (a, b) in sums.profile.iter_mut().zip(&part.profile) {
+                *a += b;
+            }
+            for (a, b) in sums.total.iter_mut().zip(&part.total) {
+                *a += b;
+            }
+        }
+        if strategies.transmitter {
+            let lit = covered_pixels(&posed.tris, setup.tx_u, setup.tx_v, w, lay.ext);
+            let parts: Vec<TxSums> = blocks
+                .par_iter()
+                .map(|r| render_tx_rows(&setup, &posed, brdf, r.clone(), outputs, &lit))
+                .collect();
+            for part in parts {
+                for (pixel, vals) in part.splats {
+                    for (x, v) in sums.image[pixel * ch..(pixel + 1) * ch]
+                        .iter_mut()
+                        .zip(&vals)
+                    {
+                        *x += v;
+                    }
+                }
+                for (a, b) in sums.profile.iter_mut().zip(&part.profile) {
+                    *a += b;
+                }
+                for (a, b) in sums.total.iter_mut().zip(&part.total) {
+                    *a += b;
+                }
+            }
+        }
+        if let Some(report) = progress {
+            let (offset, total) = progress_offset;
+            if !report(offset + done.fetch_add(1, Relaxed) + 1, total) {
+                cancelled.store(true, Relaxed);
+            }
+        }
+        sums
+    };
+    let sums: Vec<PathSums> = rotations.par_iter().map(one).collect();
+    if cancelled.into_inner() {
+        return Err(Error::Cancelled);
+    }
+    Ok(sums)
+}
+
+/// Bytes [`render_paths`] and [`add_paths`] hold at their peak for `n` attitudes: the
+/// attitudes traced at once (one per thread) with their image and profile sums in f64 and
+/// the row blocks' sums, and every attitude's sums and split outputs.
+pub fn paths_bytes(mesh: &Mesh, sensor: &SensorSetup, n: usize, outputs: Outputs) -> usize {
+    let orders = sensor.paths.bounces.saturating_sub(1);
+    if orders == 0 {
+        return 0;
+    }
+    let lay = Layout::new(mesh, sensor);
+    let (w, ch) = (sensor.resolution, sensor.channels());
+    let image = if outputs.image { w * w * ch } else { 0 };
+    let profile = if outputs.profile { lay.n_bins * ch } else { 0 };
+    // per attitude: its sums (f64) and the blocks' copies while they are joined
+    let one = orders * (image + profile) * 8 * 2;
+    let at_once = rayon::current_num_threads().max(1).min(n);
+    // kept for every attitude: the sums (f64) and the split outputs (f32 images, f64 profiles)
+    let kept = n.saturating_mul(
+        orders * (image * 8 + profile * 8) + (orders + 1) * (image * 4 + profile * 8),
+    );
+    at_once.saturating_mul(one).saturating_add(kept)
+}
+
+/// Refuse inter-reflections that would not fit in the memory available (an allocation
+/// failure aborts the process), naming the memory needed.
+pub fn check_paths_memory(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    n: usize,
+    outputs: Outputs,
+) -> Result<()> {
+    let need = paths_bytes(mesh, sensor, n, outputs);
+    if let Some(avail) = super::cpu::available_memory() {
+        if need > avail {
+            const GIB: f64 = (1u64 << 30) as f64;
+            return Err(Error::param(
+                "bounces",
+                sensor.paths.bounces,
+                format!(
+                    "the inter-reflections of this render ({n} attitude(s), {w} x {w} pixels) \
+                     need about {:.1} GiB of memory beside the render and {:.1} GiB are \
+                     available: render fewer attitudes per call, request fewer outputs (images \
+                     split by bounces are the largest), or lower the resolution",
+                    need as f64 / GIB,
+                    avail as f64 / GIB,
+                    w = sensor.resolution,
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Add the paths of each attitude (`sums`, from [`render_paths`]) to a backend's
+/// one-bounce result, and split the outputs by bounces (`bounce_*` of [`Rendered`]: the
+/// backend's values first, then each order's).
+pub fn add_paths(r: &mut Rendered, sensor: &SensorSetup, sums: &[PathSums]) {
+    let orders = sensor.paths.bounces - 1;
+    let k = orders + 1;
+    let (n, ch) = (r.n, r.channels);
+    let mut bt = Vec::with_capacity(n * k * ch);
+    for (a, s) in sums.iter().enumerate() {
+        let direct = &r.total[a * ch..(a + 1) * ch];
+        bt.extend_from_slice(direct);
+        bt.extend_from_slice(&s.total);
+        for o in 0..orders {
+            for c in 0..ch {
+                r.total[a * ch + c] += s.total[o * ch + c];
+            }
+        }
+    }
+    r.bounce_total = bt;
+    if let Some(prof) = r.profile.as_mut() {
+        let per = r.n_bins * ch;
+        let mut bp = Vec::with_capacity(n * k * per);
+        for (a, s) in sums.iter().enumerate() {
+            bp.extend_from_slice(&prof[a * per..(a + 1) * per]);
+            bp.extend_from_slice(&s.profile);
+            for o in 0..orders {
+                for (x, y) in prof[a * per..(a + 1) * per]
+                    .iter_mut()
+                    .zip(&s.profile[o * per..(o + 1) * per])
+                {
+                    *x += y;
+                }
+            }
+        }
+        r.bounce_profile = Some(bp);
+    }
+    if let Some(img) = r.image.as_mut() {
+        let per = r.height * r.width * ch;
+        let mut bi = Vec::with_capacity(n * k * per);
+        for (a, s) in sums.iter().enumerate() {
+            let direct = &mut img[a * per..(a + 1) * per];
+            bi.extend_from_slice(direct);
+            bi.extend(s.image.iter().map(|&v| v as f32));
+            for (j, x) in direct.iter_mut().enumerate() {
+                let more: f64 = (0..orders).map(|o| s.image[o * per + j]).sum();
+                *x = (*x as f64 + more) as f32;
+            }
+        }
+        r.bounce_image = Some(bi);
+    }
+}
+
+#[cfg(test)]
+mod tests;

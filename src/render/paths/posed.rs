@@ -1,0 +1,214 @@
+//! The mesh as the paths see it: one attitude's triangles in a BVH with what a hit needs
+//! ([`Posed`], [`Vertex`]), and what is known before tracing: meshes with no
+//! inter-reflections, the sides of faces with nothing in front, the pixels a mesh may cover.
+
+use super::*;
+
+/// Whether no ray leaving the mesh's visible side can meet it again: every face plane has
+/// all vertices on or behind it (a closed convex mesh), or all vertices lie in one plane.
+/// Within `1e-9` of the bounding radius.
+pub fn has_no_interreflections(mesh: &Mesh) -> bool {
+    let tol = 1e-9 * mesh.radius.max(f64::MIN_POSITIVE);
+    let vs: Vec<V3> = mesh.vertices.iter().map(|&v| V3::from(v)).collect();
+    let plane = |f: &[u32; 3]| {
+        let [a, b, c] = f.map(|k| vs[k as usize]);
+        let n = cross(b - a, c - a);
+        let l = dot(n, n).sqrt();
+        (l > 0.0).then(|| (n / l, a))
+    };
+    let flat = match mesh.faces.iter().find_map(plane) {
+        Some((n, a)) => vs.iter().all(|&v| dot(n, v - a).abs() <= tol),
+        None => true,
+    };
+    if flat {
+        return true;
+    }
+    mesh.closed
+        && mesh
+            .faces
+            .iter()
+            .filter_map(plane)
+            .all(|(n, a)| vs.iter().all(|&v| dot(n, v - a) <= tol))
+}
+
+/// For each face, whether any vertex of the mesh lies in front of its plane (`[0]`, the side
+/// its winding's normal points to) and behind it (`[1]`), beyond `1e-9` of the bounding
+/// radius: a ray leaving a face on a side with nothing there cannot meet the mesh, so no
+/// path is drawn from it. Computed per flat surface ([`Mesh::surfaces`]: one plane);
+/// where that would take more than about `5e7` vertex tests (a large smooth mesh), every
+/// side is reported open.
+pub fn open_sides(mesh: &Mesh) -> Vec<[bool; 2]> {
+    let surf = mesh.surfaces();
+    let n_surf = surf
+        .iter()
+        .enumerate()
+        .filter(|&(t, &s)| s as usize == t)
+        .count();
+    if n_surf.saturating_mul(mesh.vertices.len()) > 50_000_000 {
+        return vec![[true, true]; mesh.faces.len()];
+    }
+    let tol = 1e-9 * mesh.radius;
+    let vs: Vec<V3> = mesh.vertices.iter().map(|&v| V3::from(v)).collect();
+    let mut by_surface: std::collections::HashMap<u32, [bool; 2]> = Default::default();
+    let mut out = Vec::with_capacity(mesh.faces.len());
+    for &root in surf {
+        let sides = *by_surface.entry(root).or_insert_with(|| {
+            let [a, b, c] = mesh.faces[root as usize].map(|k| vs[k as usize]);
+            let n = cross(b - a, c - a);
+            let l = dot(n, n).sqrt();
+            if l <= 0.0 || l.is_nan() {
+                return [true, true];
+            }
+            let n = n / l;
+            let mut sides = [false, false];
+            for &v in &vs {
+                let d = dot(n, v - a);
+                sides[0] |= d > tol;
+                sides[1] |= d < -tol;
+                if sides[0] && sides[1] {
+                    break;
+                }
+            }
+            sides
+        });
+        // a face of a surface shares its plane and orientation (Mesh::surfaces)
+        out.push(sides);
+    }
+    out
+}
+
+/// The area of each flat surface ([`Mesh::surfaces`]) at the index of its first face (0
+/// elsewhere).
+pub(super) fn surface_areas(mesh: &Mesh) -> Vec<f64> {
+    let surf = mesh.surfaces();
+    let mut area = vec![0.0; mesh.faces.len()];
+    for (t, f) in mesh.faces.iter().enumerate() {
+        let [a, b, c] = f.map(|k| V3::from(mesh.vertices[k as usize]));
+        area[surf[t] as usize] += 0.5 * cross(b - a, c - a).length();
+    }
+    area
+}
+
+/// A surface a path meets: the point, the geometric normal and the shading normal (both
+/// on the side the ray came from), the material and the triangle.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Vertex {
+    pub(super) p: V3,
+    pub(super) ng: V3,
+    pub(super) n: V3,
+    pub(super) mat: usize,
+    pub(super) tri: usize,
+}
+
+/// The mesh in one attitude: its rotated triangles in a [`Bvh`] and what a hit needs.
+pub(super) struct Posed<'a> {
+    pub(super) mesh: &'a Mesh,
+    pub(super) rot: &'a Rot,
+    /// [`open_sides`] of the mesh.
+    pub(super) open: &'a [[bool; 2]],
+    pub(super) tris: Vec<[V3; 3]>,
+    pub(super) bvh: Bvh,
+    /// Ray origins leave a surface by this much along its normal (m).
+    pub(super) eps: f64,
+}
+
+impl<'a> Posed<'a> {
+    pub(super) fn new(mesh: &'a Mesh, rot: &'a Rot, open: &'a [[bool; 2]]) -> Self {
+        let vs: Vec<V3> = mesh
+            .vertices
+            .iter()
+            .map(|&v| rotate(rot, V3::from(v)))
+            .collect();
+        let tris: Vec<[V3; 3]> = mesh
+            .faces
+            .iter()
+            .map(|f| f.map(|k| vs[k as usize]))
+            .collect();
+        let bvh = Bvh::new(&tris);
+        Posed {
+            mesh,
+            rot,
+            open,
+            tris,
+            bvh,
+            eps: 1e-9 * mesh.radius,
+        }
+    }
+
+    /// The first surface along `o + t d` (`t > 0`), with its normals facing `-d`.
+    pub(super) fn trace(&self, o: V3, d: V3) -> Option<Vertex> {
+        let hit = self.bvh.closest_hit(o, d, 0.0, f64::INFINITY)?;
+        let [a, b, c] = self.tris[hit.tri];
+        let p = a + hit.u * (b - a) + hit.v * (c - a);
+        let mut ng = normalize(cross(b - a, c - a));
+        if !ng.is_finite() {
+            return None;
+        }
+        if dot(ng, d) > 0.0 {
+            ng = -ng;
+        }
+        let mut n = ng;
+        if let Some(ns) = &self.mesh.normals {
+            let [na, nb, nc] = self.mesh.faces[hit.tri].map(|k| V3::from(ns[k as usize]));
+            let v = rotate(
+                self.rot,
+                (1.0 - hit.u - hit.v) * na + hit.u * nb + hit.v * nc,
+            );
+            let l = dot(v, v).sqrt();
+            if l > 1e-15 {
+                n = v / l;
+                if dot(n, ng) < 0.0 {
+                    n = -n;
+                }
+            }
+        }
+        Some(Vertex {
+            p,
+            ng,
+            n,
+            mat: self.mesh.face_material[hit.tri] as usize,
+            tri: hit.tri,
+        })
+    }
+
+    /// Whether anything of the mesh lies on the side of `v`'s face that `v.ng` points to.
+    pub(super) fn side_open(&self, v: &Vertex) -> bool {
+        let [a, b, c] = self.tris[v.tri];
+        let front = dot(v.ng, cross(b - a, c - a)) > 0.0;
+        self.open[v.tri][if front { 0 } else { 1 }]
+    }
+
+    /// Whether `v` sees the transmitter (toward unit `wi`) past the rest of the mesh.
+    pub(super) fn lit(&self, v: &Vertex, wi: V3) -> bool {
+        dot(v.ng, wi) > 0.0
+            && dot(v.n, wi) > 0.0
+            && !self
+                .bvh
+                .any_hit(v.p + self.eps * v.ng, wi, 0.0, f64::INFINITY, Some(v.tri))
+    }
+}
+
+/// The pixels of a `w x w` image of the square `[-ext, ext]^2` (row 0 at the top) that
+/// the triangles may cover, projected on the axes `(u, v)`: each triangle's bounding box,
+/// widened by a pixel (conservative: no pixel with a triangle in it is left out).
+pub(super) fn covered_pixels(tris: &[[V3; 3]], u: V3, v: V3, w: usize, ext: f64) -> Vec<bool> {
+    let mut mask = vec![false; w * w];
+    let pix = 2.0 * ext / w as f64;
+    let last = (w - 1) as f64;
+    for t in tris {
+        let xs = t.map(|p| dot(p, u));
+        let ys = t.map(|p| dot(p, v));
+        let (x0, x1) = (xs[0].min(xs[1]).min(xs[2]), xs[0].max(xs[1]).max(xs[2]));
+        let (y0, y1) = (ys[0].min(ys[1]).min(ys[2]), ys[0].max(ys[1]).max(ys[2]));
+        let c0 = ((x0 + ext) / pix - 1.0).floor().clamp(0.0, last) as usize;
+        let c1 = ((x1 + ext) / pix + 1.0).floor().clamp(0.0, last) as usize;
+        let r0 = ((ext - y1) / pix - 1.0).floor().clamp(0.0, last) as usize;
+        let r1 = ((ext - y0) / pix + 1.0).floor().clamp(0.0, last) as usize;
+        for r in r0..=r1 {
+            mask[r * w + c0..=r * w + c1]
+                .iter_mut()
+                .for_each(|m| *m = true);
+        }
+    }
+    mask
+}

@@ -1,0 +1,187 @@
+//! The paths drawn from the receiver's side: a point of the pixel, directions from each
+//! surface's lobes, next-event estimation toward the transmitter ([`render_rows`]).
+
+use super::*;
+
+/// The paths of the pixels `rows` of one attitude: their image rows, profile and totals.
+// (the loop over orders indexes the pixel's sums and also picks the random numbers and the
+// strategies by order)
+#[allow(clippy::needless_range_loop)]
+pub(super) fn render_rows(
+    setup: &Setup<'_>,
+    posed: &Posed<'_>,
+    brdf: &(impl PathBrdf + ?Sized),
+    rows: std::ops::Range<usize>,
+    outputs: Outputs,
+    mask: &[bool],
+    mirrors: &Mirrors,
+) -> PathSums {
+    let (w, ch, orders) = (setup.width, setup.ch, setup.orders);
+    let nb = setup.lay.n_bins;
+    let paths = setup.sensor.paths;
+    let mut out = PathSums {
+        image: vec![
+            0.0;
+            if outputs.image {
+                orders * rows.len() * w * ch
+            } else {
+                0
+            }
+        ],
+        profile: vec![0.0; if outputs.profile { orders * nb * ch } else { 0 }],
+        total: vec![0.0; orders * ch],
+    };
+    let ext = setup.lay.ext;
+    let n = paths.samples;
+    // each path's share of the pixel: 4 pi delta^2 / N
+    let weight = 4.0 * PI * setup.pix * setup.pix / n as f64;
+    let (wi, wo) = (setup.wi, setup.wo);
+    for row in rows.clone() {
+        for col in 0..w {
+            let pixel = (row * w + col) as u32;
+            let mut px = vec![[0.0f64; 16]; orders];
+            let rng = PixelRng::new(paths.seed, pixel);
+            let n = if mask[pixel as usize] { n } else { 0 };
+            for i in 0..n {
+                let u = rng.set(i, 0);
+                let x = -ext + (col as f64 + u[0]) * setup.pix;
+                let y = ext - (row as f64 + u[1]) * setup.pix;
+                let Some(v1) = posed.trace(V3::new(x, y, 2.0 * ext), -V3::Z) else {
+                    continue;
+                };
+                if dot(v1.ng, wo) <= 0.0 || dot(v1.n, wo) <= 0.0 {
+                    continue;
+                }
+                // the throughput from the beam arriving at the current surface (in basis
+                // `x_t`) to the receiver (in `x_out1`), and the path's length so far from
+                // the current surface to the receiver's plane
+                let mut t = [[0.0; 4]; 4];
+                for (k, row) in t.iter_mut().enumerate() {
+                    row[k] = 1.0;
+                }
+                let mut x_t = V3::ZERO;
+                let mut x_out1 = V3::ZERO;
+                let mut length = -dot(v1.p, wo);
+                let (mut v, mut w_out) = (v1, wo);
+                for order in 0..orders {
+                    if !posed.side_open(&v) {
+                        break;
+                    }
+                    // draw the direction toward the next surface at `v`
+                    let c = dot(v.n, w_out);
+                    let s = cross(v.n, w_out);
+                    let Some(lobes) = brdf.lobes(v.mat, c, dot(s, s).sqrt()) else {
+                        break;
+                    };
+                    if order == 1 && !mirrors.list.is_empty() {
+                        // a 3-bounce path aimed from `v` at a mirror of the transmitter
+                        let aimed = aim(
+                            setup,
+                            posed,
+                            brdf,
+                            mirrors,
+                            &v,
+                            w_out,
+                            &lobes,
+                            rng.set(i, 3),
+                        );
+                        if let Some((m, x_in, r3)) = aimed {
+                            let m = mat_mul(&mul_rotation(&t, basis_change(x_t, m.1, w_out)), &m.0);
+                            let vals = setup.channels(&m, x_in, x_out1, weight);
+                            if vals.iter().all(|x| x.is_finite()) {
+                                for (a, b) in px[order].iter_mut().zip(&vals) {
+                                    *a += b;
+                                }
+                                if outputs.profile {
+                                    let r = 0.5 * (length + r3);
+                                    let prof =
+                                        &mut out.profile[order * nb * ch..(order + 1) * nb * ch];
+                                    setup.deposit(prof, &vals[..ch], r);
+                                }
+                            }
+                        }
+                    }
+                    let [u1, u2, u_lobe] = rng.set(i, 1 + order as u32);
+                    let Some(w_next) = sample(&lobes, v.n, w_out, [u_lobe, u1, u2]) else {
+                        break;
+                    };
+                    if dot(w_next, v.ng) <= 0.0 {
+                        break;
+                    }
+                    let p = pdf(&lobes, v.n, w_out, w_next);
+                    if p <= 0.0 || p.is_nan() {
+                        break;
+                    }
+                    // (traced first: most paths leave the mesh here, and cost no BRDF)
+                    let Some(next) = posed.trace(v.p + posed.eps * v.ng, w_next) else {
+                        break;
+                    };
+                    let f = brdf.eval(v.mat, v.n, w_next, w_out);
+                    let scale = dot(v.n, w_next) / p;
+                    let fm = f.m.map(|r| r.map(|e| e * scale));
+                    if order == 0 {
+                        t = fm;
+                        x_out1 = f.x_out;
+                    } else {
+                        // the beam v -> previous surface: in f's output basis, into t's input
+                        t = mat_mul(&mul_rotation(&t, basis_change(x_t, f.x_out, w_out)), &fm);
+                    }
+                    x_t = f.x_in;
+                    length += dot(next.p - v.p, next.p - v.p).sqrt();
+                    // next-event: `next` lit by the transmitter, seen from `v` along -w_next
+                    let back = -w_next;
+                    let drawn = order > 0 || setup.strategies.receiver;
+                    if drawn && dot(next.n, back) > 0.0 && posed.lit(&next, wi) {
+                        let g = brdf.eval(next.mat, next.n, wi, back);
+                        let ci = dot(next.n, wi);
+                        // a 2-bounce path is also drawn from the transmitter's side
+                        let mis = if order == 0 && setup.strategies.transmitter {
+                            let a = dot(v.ng, wo).abs() * p * dot(next.ng, back).abs();
+                            let b = transmitter_density(brdf, &next, wi, back)
+                                * dot(v.ng, w_next).abs();
+                            if a > 0.0 {
+                                a / (a + b)
+                            } else {
+                                0.0
+                            }
+                        } else if order == 1 && setup.strategies.aim {
+                            // a 3-bounce path is also aimed at a mirror from `v`
+                            let b = mirrors.density(&next, w_next, wi);
+                            p / (p + b)
+                        } else {
+                            1.0
+                        };
+                        let gm = g.m.map(|r| r.map(|e| e * ci * mis));
+                        let m = mat_mul(&mul_rotation(&t, basis_change(x_t, g.x_out, back)), &gm);
+                        let vals = setup.channels(&m, g.x_in, x_out1, weight);
+                        if vals[0].is_finite() && vals.iter().all(|x| x.is_finite()) {
+                            for (a, b) in px[order].iter_mut().zip(&vals) {
+                                *a += b;
+                            }
+                            if outputs.profile {
+                                let r = 0.5 * (length - dot(next.p, wi));
+                                let prof = &mut out.profile[order * nb * ch..(order + 1) * nb * ch];
+                                setup.deposit(prof, &vals[..ch], r);
+                            }
+                        }
+                    }
+                    if dot(next.n, back) <= 0.0 {
+                        break;
+                    }
+                    v = next;
+                    w_out = back;
+                }
+            }
+            for (order, vals) in px.iter().enumerate() {
+                for (c, &v) in vals.iter().enumerate().take(ch) {
+                    out.total[order * ch + c] += v;
+                    if outputs.image {
+                        let k = ((order * rows.len() + (row - rows.start)) * w + col) * ch + c;
+                        out.image[k] = v;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
