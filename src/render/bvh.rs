@@ -9,8 +9,10 @@
 //!
 //! The tree: nodes in one flat array (depth first, left child next to its parent), each an
 //! axis-aligned box and either two children or a run of at most [`LEAF_SIZE`] triangles of
-//! the permuted triangle list. Built top-down by splitting at the median centroid along
-//! the box's longest axis (a balanced tree, `O(n log n)`, depth about `log2(n / LEAF_SIZE)`).
+//! the permuted triangle list. Built top-down by the binned surface-area heuristic
+//! ([`SAH_BINS`] centroid bins per axis), at the median centroid along the longest axis
+//! where it cannot split or below depth [`SAH_DEPTH`] (so the depth stays under `SAH_DEPTH +
+//! log2(n / LEAF_SIZE)`, within the walk's stack of 96). Walks visit the nearer child first.
 //! The flat layout is what a GPU kernel can walk with a small stack.
 
 use crate::optics::frames::{cross, dot, V3};
@@ -189,7 +191,7 @@ impl Bvh {
             return;
         };
         // nodes to visit with where the ray enters their boxes: the nearer child on top
-        let mut stack = [(0u32, 0.0f64); 64];
+        let mut stack = [(0u32, 0.0f64); 96];
         stack[0] = (0, t_root);
         let mut top = 1;
         while top > 0 {
@@ -243,9 +245,33 @@ impl Bvh {
     }
 }
 
+/// Bins per axis of the surface-area heuristic ([`build`]).
+const SAH_BINS: usize = 16;
+/// Below this depth splits follow the surface-area heuristic; from it on, the median
+/// (a bound on the depth, for the walk's fixed stack).
+const SAH_DEPTH: usize = 40;
+
+/// Surface area of a box (half of it: only ratios matter).
+fn half_area(lo: V3, hi: V3) -> f64 {
+    let e = (hi - lo).max(V3::ZERO);
+    e.x * e.y + e.y * e.z + e.z * e.x
+}
+
 /// Build the subtree of `items` (whose triangles start at `offset` of the final list) into
-/// `nodes`; returns its root's index.
+/// `nodes`; returns its root's index. Splits by the binned surface-area heuristic (the
+/// plane between [`SAH_BINS`] centroid bins per axis that minimises `A_left N_left + A_right
+/// N_right`; Wald 2007), at the median centroid along the longest axis where all centroids
+/// coincide or below [`SAH_DEPTH`].
 fn build(items: &mut [(usize, [V3; 3])], offset: usize, nodes: &mut Vec<Node>) -> u32 {
+    build_at(items, offset, nodes, 0)
+}
+
+fn build_at(
+    items: &mut [(usize, [V3; 3])],
+    offset: usize,
+    nodes: &mut Vec<Node>,
+    depth: usize,
+) -> u32 {
     let tris: Vec<[V3; 3]> = items.iter().map(|(_, t)| *t).collect();
     let (lo, hi) = bounds(&tris);
     let me = nodes.len() as u32;
@@ -259,25 +285,102 @@ fn build(items: &mut [(usize, [V3; 3])], offset: usize, nodes: &mut Vec<Node>) -
         return me;
     }
     let centroid = |t: &[V3; 3]| (t[0] + t[1] + t[2]) / 3.0;
-    let ext = hi - lo;
-    let axis = if ext.x >= ext.y && ext.x >= ext.z {
-        0
-    } else if ext.y >= ext.z {
-        1
-    } else {
-        2
+    let (mut c_lo, mut c_hi) = (V3::splat(f64::INFINITY), V3::splat(f64::NEG_INFINITY));
+    for (_, t) in items.iter() {
+        let c = centroid(t);
+        c_lo = c_lo.min(c);
+        c_hi = c_hi.max(c);
+    }
+    let mid = match (depth < SAH_DEPTH)
+        .then(|| sah_split(items, c_lo, c_hi))
+        .flatten()
+    {
+        Some(m) => m,
+        None => {
+            let ext = hi - lo;
+            let axis = if ext.x >= ext.y && ext.x >= ext.z {
+                0
+            } else if ext.y >= ext.z {
+                1
+            } else {
+                2
+            };
+            let mid = items.len() / 2;
+            items.select_nth_unstable_by(mid, |a, b| {
+                centroid(&a.1)[axis].total_cmp(&centroid(&b.1)[axis])
+            });
+            mid
+        }
     };
-    let mid = items.len() / 2;
-    items.select_nth_unstable_by(mid, |a, b| {
-        centroid(&a.1)[axis].total_cmp(&centroid(&b.1)[axis])
-    });
     let (left, right) = items.split_at_mut(mid);
-    let l = build(left, offset, nodes);
-    let r = build(right, offset + mid, nodes);
+    let l = build_at(left, offset, nodes, depth + 1);
+    let r = build_at(right, offset + mid, nodes, depth + 1);
     debug_assert_eq!(l, me + 1);
     nodes[me as usize].first = r;
     nodes[me as usize].count = 0;
     me
+}
+
+/// The binned surface-area split of `items` (centroids within `[c_lo, c_hi]`): partitions
+/// them in place and returns the size of the left part, or `None` where no plane separates
+/// two non-empty parts (all centroids in one bin on every axis).
+fn sah_split(items: &mut [(usize, [V3; 3])], c_lo: V3, c_hi: V3) -> Option<usize> {
+    let centroid = |t: &[V3; 3]| (t[0] + t[1] + t[2]) / 3.0;
+    let mut best: Option<(f64, usize, usize)> = None; // (cost, axis, bins on the left)
+    for axis in 0..3 {
+        let (a, b) = (c_lo[axis], c_hi[axis]);
+        if b <= a || b.is_nan() || a.is_nan() {
+            continue;
+        }
+        let scale = SAH_BINS as f64 / (b - a);
+        let bin = |t: &[V3; 3]| (((centroid(t)[axis] - a) * scale) as usize).min(SAH_BINS - 1);
+        let mut count = [0usize; SAH_BINS];
+        let mut boxes = [(V3::splat(f64::INFINITY), V3::splat(f64::NEG_INFINITY)); SAH_BINS];
+        for (_, t) in items.iter() {
+            let k = bin(t);
+            count[k] += 1;
+            for v in t {
+                boxes[k].0 = boxes[k].0.min(*v);
+                boxes[k].1 = boxes[k].1.max(*v);
+            }
+        }
+        // sweep from the right: the area and count of bins k.. for each k
+        let mut right = [(0.0f64, 0usize); SAH_BINS];
+        let (mut rl, mut rh, mut rn) = (V3::splat(f64::INFINITY), V3::splat(f64::NEG_INFINITY), 0);
+        for k in (1..SAH_BINS).rev() {
+            rl = rl.min(boxes[k].0);
+            rh = rh.max(boxes[k].1);
+            rn += count[k];
+            right[k] = (half_area(rl, rh), rn);
+        }
+        let (mut ll, mut lh, mut ln) = (V3::splat(f64::INFINITY), V3::splat(f64::NEG_INFINITY), 0);
+        for k in 1..SAH_BINS {
+            ll = ll.min(boxes[k - 1].0);
+            lh = lh.max(boxes[k - 1].1);
+            ln += count[k - 1];
+            let (ra, rn) = right[k];
+            if ln == 0 || rn == 0 {
+                continue;
+            }
+            let cost = half_area(ll, lh) * ln as f64 + ra * rn as f64;
+            if best.is_none_or(|(c, _, _)| cost < c) {
+                best = Some((cost, axis, k));
+            }
+        }
+    }
+    let (_, axis, k) = best?;
+    let (a, b) = (c_lo[axis], c_hi[axis]);
+    let scale = SAH_BINS as f64 / (b - a);
+    let left_of = |t: &[V3; 3]| (((centroid(t)[axis] - a) * scale) as usize).min(SAH_BINS - 1) < k;
+    // partition in place, keeping the order within each side deterministic
+    let mut i = 0;
+    for j in 0..items.len() {
+        if left_of(&items[j].1) {
+            items.swap(i, j);
+            i += 1;
+        }
+    }
+    (i > 0 && i < items.len()).then_some(i)
 }
 
 #[cfg(test)]
@@ -358,8 +461,7 @@ mod tests {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
         for tris in [soup(&mut rng, 700), mesh_tris()] {
             let bvh = Bvh::new(&tris);
-            // median splits of runs over LEAF_SIZE leave leaves of at least 2: at most n/2
-            // leaves, n - 1 nodes
+            // leaves of up to LEAF_SIZE triangles: fewer nodes than triangles here
             assert!(bvh.node_count() < tris.len());
             let (mut hits, mut checked) = (0, 0);
             for k in 0..3000 {
@@ -426,6 +528,43 @@ mod tests {
 
     /// Rays parallel to a triangle's plane, a zero direction, an empty tree and NaN input
     /// give no hit (no NaN `t`, no panic).
+    /// Trees the surface-area heuristic would make deep (triangles at exponentially spaced
+    /// positions, each a factor 1.5 farther out) and trees it cannot split (1000 copies of
+    /// one triangle) stay within the walk's stack and find the brute force's hits.
+    #[test]
+    fn unbalanced_and_unsplittable_trees_are_walked() {
+        fn depth(bvh: &Bvh, k: usize) -> usize {
+            let n = bvh.nodes[k];
+            if n.count > 0 {
+                1
+            } else {
+                1 + depth(bvh, k + 1).max(depth(bvh, n.first as usize))
+            }
+        }
+        let tri = |x: f64| {
+            [
+                V3::new(x, 0.0, 0.0),
+                V3::new(x, 1.0, 0.0),
+                V3::new(x, 0.0, 1.0),
+            ]
+        };
+        let spread: Vec<[V3; 3]> = (0..1500)
+            .map(|k| tri(1.5f64.powi(k % 1500 / 2) * 1e-300))
+            .collect();
+        let same: Vec<[V3; 3]> = (0..1000).map(|_| tri(0.5)).collect();
+        for tris in [spread, same] {
+            let bvh = Bvh::new(&tris);
+            let d = depth(&bvh, 0);
+            assert!(d < 90, "depth {d}");
+            for y in [0.1, 0.3, 0.45] {
+                let (o, dir) = (V3::new(-1.0, y, 0.2), V3::X);
+                let want = brute(&tris, o, dir, 0.0, f64::INFINITY, None).map(|(_, t)| t);
+                let got = bvh.closest_hit(o, dir, 0.0, f64::INFINITY).map(|h| h.t);
+                assert_eq!(want, got);
+            }
+        }
+    }
+
     #[test]
     fn degenerate_rays_and_trees_miss() {
         let tri = [
