@@ -127,6 +127,61 @@ impl Bvh {
         }
     }
 
+    /// The nodes as `shaders/raycast.wgsl` reads them: per node `[lo.x, lo.y, lo.z,
+    /// bits(first), hi.x, hi.y, hi.z, bits(count)]` in f32, the bounds rounded outward so
+    /// that they contain their triangles' f32 corners.
+    pub fn gpu_nodes(&self) -> Vec<[f32; 8]> {
+        let down = |x: f64| {
+            let f = x as f32;
+            if f as f64 > x {
+                f.next_down()
+            } else {
+                f
+            }
+        };
+        let up = |x: f64| {
+            let f = x as f32;
+            if (f as f64) < x {
+                f.next_up()
+            } else {
+                f
+            }
+        };
+        self.nodes
+            .iter()
+            .map(|n| {
+                [
+                    down(n.lo.x),
+                    down(n.lo.y),
+                    down(n.lo.z),
+                    f32::from_bits(n.first),
+                    up(n.hi.x),
+                    up(n.hi.y),
+                    up(n.hi.z),
+                    f32::from_bits(n.count),
+                ]
+            })
+            .collect()
+    }
+
+    /// The triangles in the tree's order as `shaders/raycast.wgsl` reads them: three
+    /// corners `[x, y, z, w]` each in f32, `w` of the first the bits of the triangle's index
+    /// in the list the tree was built from.
+    pub fn gpu_triangles(&self) -> Vec<[f32; 4]> {
+        let mut out = Vec::with_capacity(3 * self.tris.len());
+        for (t, &i) in self.tris.iter().zip(&self.order) {
+            for (c, v) in t.iter().enumerate() {
+                let w = if c == 0 {
+                    f32::from_bits(i as u32)
+                } else {
+                    0.0
+                };
+                out.push([v.x as f32, v.y as f32, v.z as f32, w]);
+            }
+        }
+        out
+    }
+
     /// Number of nodes (for tests and statistics).
     pub fn node_count(&self) -> usize {
         self.nodes.len()

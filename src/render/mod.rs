@@ -112,8 +112,7 @@ pub mod tables;
 pub(crate) mod test_scenes;
 
 pub use api::{
-    check_samples, check_sensor, Layout, Outputs, Progress, Rendered, SensorSetup,
-    MAX_IMAGE_SIDE,
+    check_samples, check_sensor, Layout, Outputs, Progress, Rendered, SensorSetup, MAX_IMAGE_SIDE,
 };
 
 /// Speed of light in vacuum (m/s).
@@ -143,7 +142,11 @@ mod tests {
     #[test]
     fn multiview_visibility_needs_the_multiview_capability() {
         let src = shaders::visibility_views_module();
-        validate_with("visibility_views", &src, naga::valid::Capabilities::MULTIVIEW);
+        validate_with(
+            "visibility_views",
+            &src,
+            naga::valid::Capabilities::MULTIVIEW,
+        );
         let module = naga::front::wgsl::parse_str(&src).unwrap();
         assert!(naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),
@@ -156,9 +159,13 @@ mod tests {
     /// Every shader parses and validates with naga (no optional capabilities needed).
     #[test]
     fn shaders_validate_with_naga() {
-        validate("visibility (raster + visibility)", &shaders::visibility_module());
+        validate(
+            "visibility (raster + visibility)",
+            &shaders::visibility_module(),
+        );
         validate("pulse.wgsl", shaders::PULSE);
         validate("gather.wgsl", shaders::GATHER);
+        validate("raycast.wgsl", shaders::RAYCAST);
         let m = validate("shade (pulse + shade)", &shaders::shade_module());
         // the uniform block's size matches the Rust struct
         let params = m

@@ -18,6 +18,8 @@ pub const SHADE: &str = include_str!("../../shaders/shade.wgsl");
 /// kernel.
 pub const PULSE: &str = include_str!("../../shaders/shared/pulse.wgsl");
 pub const GATHER: &str = include_str!("../../shaders/gather.wgsl");
+/// Closest hits of rays against the flat BVH ([`crate::render::gpu::raycast`]).
+pub const RAYCAST: &str = include_str!("../../shaders/raycast.wgsl");
 
 /// The files an include line may name, by their path under `shaders/`.
 pub const SHARED: &[(&str, &str)] = &[
@@ -161,7 +163,11 @@ mod tests {
         let e = expand("k", "//#include shared/complex.wgsl").unwrap_err();
         assert!(e.contains("malformed"), "{e}");
         let ok = expand("k", "x\n  //#include \"shared/complex.wgsl\"\ny").unwrap();
-        let complex = SHARED.iter().find(|(p, _)| *p == "shared/complex.wgsl").unwrap().1;
+        let complex = SHARED
+            .iter()
+            .find(|(p, _)| *p == "shared/complex.wgsl")
+            .unwrap()
+            .1;
         assert_eq!(ok, format!("x\n{complex}y\n"));
     }
 

@@ -37,6 +37,7 @@ mod pack;
 mod passes;
 mod pipelines;
 mod plan;
+pub mod raycast;
 mod readback;
 mod targets;
 mod util;
@@ -54,8 +55,8 @@ use super::geometry::{Mesh, Rot};
 use crate::error::Result;
 use passes::{encode_chunk, shade_key, ChunkBindings, SceneBuffers};
 use plan::Plan;
-use std::time::Instant;
 use readback::{HostOutputs, ResultBuffers};
+use std::time::Instant;
 use targets::Targets;
 
 /// Refuse an empty batch of attitudes.
