@@ -153,12 +153,15 @@ def render(
     device : {"auto", "cpu", "gpu"}, optional
         ``"auto"`` (default), ``"cpu"`` (lavapipe) or ``"gpu"`` (see :func:`device_info`).
     settings : Settings, optional
-        How to compute it (quality, resolution, samples, tables, arithmetic): these replace
-        the sensor's own (:attr:`Lidar.settings`), so one sensor can be rendered at several
-        settings. Default: the sensor's.
+        How to compute it (quality, resolution, samples, tables, arithmetic, ``bounces``):
+        these replace the sensor's own (:attr:`Lidar.settings`), so one sensor can be
+        rendered at several settings. Default: the sensor's. With ``bounces`` > 1 the light
+        reflected between parts is added (traced on the CPU for every device) and
+        ``RenderResult.by_bounce`` splits the outputs by the number of reflections.
     progress : callable, optional
         ``progress(done, total)``, called as attitudes are done (after each chunk on a
-        device, after each attitude on the CPU, then from worker threads), e.g. to update a
+        device, after each attitude on the CPU, then from worker threads; with ``bounces``
+        > 1 the paths are a second pass, counted in ``total = 2 N``), e.g. to update a
         ``tqdm`` bar. An exception it raises stops the render and propagates; Ctrl-C
         (KeyboardInterrupt) stops a device render between chunks too.
 
@@ -173,7 +176,8 @@ def render(
         For a mesh too small for the image's pixels (under 2 across: it lies far from the body
         origin, or the resolution is tiny), outputs the sensor cannot give, materials built
         at another wavelength than the sensor's (beyond 1e-6 relative), an empty or invalid
-        batch of attitudes, or an unknown ``device``.
+        batch of attitudes, an unknown ``device``, or inter-reflections that would not fit
+        in the memory available (naming ``bounces``).
 
     Warns
     -----
