@@ -10,8 +10,8 @@
 //! The tree: nodes in one flat array (depth first, left child next to its parent), each an
 //! axis-aligned box and either two children or a run of at most [`LEAF_SIZE`] triangles of
 //! the permuted triangle list. Built top-down by the binned surface-area heuristic
-//! ([`SAH_BINS`] centroid bins per axis), at the median centroid along the longest axis
-//! where it cannot split or below depth [`SAH_DEPTH`] (so the depth stays under `SAH_DEPTH +
+//! (`SAH_BINS` centroid bins per axis), at the median centroid along the longest axis
+//! where it cannot split or below depth `SAH_DEPTH` (so the depth stays under `SAH_DEPTH +
 //! log2(n / LEAF_SIZE)`, within the walk's stack of 96). Walks visit the nearer child first.
 //! The flat layout is what a GPU kernel can walk with a small stack.
 

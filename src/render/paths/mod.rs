@@ -33,6 +33,22 @@
 //! there for the next order. Directions below a surface's geometric or shading horizon
 //! carry nothing.
 //!
+//! **Strategies** ([`Strategies`]), combined by the balance heuristic (each path weighted
+//! by its density under the strategy that drew it over the sum of the densities under
+//! every strategy that could have; the densities in the product of the two surfaces' area
+//! measures): the receiver's side above (`receiver.rs`); for 2 bounces also the
+//! transmitter's side (`transmitter.rs`: a point of the transmitter's view of the same
+//! square, a direction from its surface's lobes about `wi`, and a connection to the
+//! receiver past the mesh), which draws well what the receiver's side draws poorly (a
+//! diffuse surface seen, lit through a glossy one); for 3 bounces also the path aimed from
+//! its middle surface at the glossy flat surfaces that mirror the transmitter
+//! (`mirrors.rs`: the metal-paint-metal corner, which neither end draws well). Each strategy
+//! alone is unbiased (tests); with the defaults all are on.
+//!
+//! **Work skipped** (the same sums): pixels no triangle's box covers, surfaces with
+//! nothing of the mesh on the side a path would leave from ([`open_sides`]), and whole
+//! meshes that cannot reflect onto themselves ([`has_no_interreflections`]).
+//!
 //! **Random numbers.** A pixel's `N` paths use scrambled Sobol' points ([`uniforms`]:
 //! three sets, shuffled and Owen-scrambled by hashes of `(seed, pixel, set)`, Burley
 //! 2020), stratified in each dimension and jointly in the pairs that draw a point or a
