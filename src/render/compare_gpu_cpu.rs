@@ -723,3 +723,94 @@ fn analytic_coverage_totals_are_exact() {
         }
     }
 }
+
+/// The paths' random numbers in WGSL (`shaders/shared/rng.wgsl`, run by
+/// `shaders/path_numbers.wgsl`) against their twin
+/// (`render::paths::PixelRng`): every number of 3 sets x 3 dimensions for 64 paths of 50
+/// pixels under two seeds is the same 24-bit value, bit for bit (the groundwork of a device
+/// path kernel: the same paths on the device as on the CPU).
+#[test]
+fn path_random_numbers_kernel_matches_twin() {
+    use crate::render::paths::PixelRng;
+    use wgpu::util::DeviceExt;
+    let g = context(DeviceChoice::Cpu).unwrap();
+    let dev = &g.device;
+    let src = crate::render::shaders::path_numbers_module();
+    let (pixels, paths) = (50u32, 64u32);
+    let n_out = (pixels * paths * 9) as usize;
+    for seed in [0u32, 0xdead_beef] {
+        let params = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("rng params"),
+            contents: bytemuck::cast_slice(&[seed, pixels, paths, 7919u32, 3u32, 0, 0, 0]),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let out = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rng out"),
+            size: (n_out * 4) as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let read = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rng read"),
+            size: (n_out * 4) as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("rng twin"),
+            source: wgpu::ShaderSource::Wgsl(src.clone().into()),
+        });
+        let pipeline = dev.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("rng twin"),
+            layout: None,
+            module: &module,
+            entry_point: Some("cs_path_numbers"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("rng twin"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: out.as_entire_binding(),
+                },
+            ],
+        });
+        let mut enc = dev.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups((pixels * paths).div_ceil(64), 1, 1);
+        }
+        enc.copy_buffer_to_buffer(&out, 0, &read, 0, (n_out * 4) as u64);
+        g.queue.submit([enc.finish()]);
+        let slice = read.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        dev.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+        let got: Vec<u32> = bytemuck::cast_slice(&slice.get_mapped_range().unwrap()).to_vec();
+        read.unmap();
+        for p in 0..pixels {
+            let rng = PixelRng::new(seed, p * 7919 + 3);
+            for i in 0..paths {
+                for set in 0..3u32 {
+                    let want = rng.set(i as usize, set);
+                    for d in 0..3 {
+                        let k = (((p * paths + i) * 3 + set) * 3) as usize + d;
+                        let u = got[k] as f64 / 16_777_216.0;
+                        assert_eq!(
+                            u, want[d],
+                            "seed {seed} pixel {p} path {i} set {set} dim {d}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}

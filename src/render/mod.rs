@@ -166,6 +166,7 @@ mod tests {
         validate("pulse.wgsl", shaders::PULSE);
         validate("gather.wgsl", shaders::GATHER);
         validate("raycast.wgsl", shaders::RAYCAST);
+        validate("path_numbers.wgsl", &shaders::path_numbers_module());
         let m = validate("shade (pulse + shade)", &shaders::shade_module());
         // the uniform block's size matches the Rust struct
         let params = m

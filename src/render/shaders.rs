@@ -20,6 +20,8 @@ pub const PULSE: &str = include_str!("../../shaders/shared/pulse.wgsl");
 pub const GATHER: &str = include_str!("../../shaders/gather.wgsl");
 /// Closest hits of rays against the flat BVH ([`crate::render::gpu::raycast`]).
 pub const RAYCAST: &str = include_str!("../../shaders/raycast.wgsl");
+/// The paths' random numbers on the device (the twin check of `shared/rng.wgsl`).
+pub const PATH_NUMBERS: &str = include_str!("../../shaders/path_numbers.wgsl");
 
 /// The files an include line may name, by their path under `shaders/`.
 pub const SHARED: &[(&str, &str)] = &[
@@ -55,6 +57,10 @@ pub const SHARED: &[(&str, &str)] = &[
     (
         "shared/coverage.wgsl",
         include_str!("../../shaders/shared/coverage.wgsl"),
+    ),
+    (
+        "shared/rng.wgsl",
+        include_str!("../../shaders/shared/rng.wgsl"),
     ),
 ];
 
@@ -110,6 +116,11 @@ pub fn visibility_views_module() -> String {
     expand("visibility_views.wgsl", VISIBILITY_VIEWS).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// The complete path-numbers module.
+pub fn path_numbers_module() -> String {
+    expand("path_numbers.wgsl", PATH_NUMBERS).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// The complete shade module (the kernel with its shared files).
 pub fn shade_module() -> String {
     expand("shade.wgsl", SHADE).unwrap_or_else(|e| panic!("{e}"))
@@ -129,6 +140,8 @@ mod tests {
             ("visibility_views.wgsl", VISIBILITY_VIEWS),
             ("shade.wgsl", SHADE),
             ("gather.wgsl", GATHER),
+            ("raycast.wgsl", RAYCAST),
+            ("path_numbers.wgsl", PATH_NUMBERS),
         ] {
             let mut seen = vec![];
             let mut out = String::new();
