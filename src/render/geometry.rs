@@ -272,6 +272,31 @@ impl Mesh {
         })
     }
 
+    /// The shading normal of face `tri` in the attitude `rot` at the barycentric weights
+    /// `l` of its corners: the interpolated vertex normals, rotated and normalized, turned
+    /// to the side of `ng` (the face's geometric normal on the side looked at); `ng` itself
+    /// on a flat-shaded mesh or where the interpolated normal vanishes. The renderers'
+    /// shading (`cpu::shade_at`) and the paths' surfaces use it.
+    pub fn shading_normal(&self, tri: usize, rot: &Rot, l: [f64; 3], ng: V3) -> V3 {
+        let Some(ns) = &self.normals else {
+            return ng;
+        };
+        let c = self.faces[tri].map(|k| ns[k as usize]);
+        let v = [0, 1, 2].map(|d| l[0] * c[0][d] + l[1] * c[1][d] + l[2] * c[2][d]);
+        let v = rotate(rot, V3::from(v));
+        let len = v.dot(v).sqrt();
+        if len > 1e-15 {
+            let n = v / len;
+            if n.dot(ng) < 0.0 {
+                -n
+            } else {
+                n
+            }
+        } else {
+            ng
+        }
+    }
+
     /// The de-indexed GPU geometry: `3 T` corners `(x, y, z, w)`, `w` the bits of the
     /// face's material at its first corner and of its surface ([`Mesh::surfaces`]) at its
     /// second, then, with normals, `3 T` corner normals `(nx, ny, nz, 0)`.

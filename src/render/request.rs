@@ -134,7 +134,7 @@ pub fn render(
             sensor,
             rotations,
             outputs,
-            &paths::Materials(&tables.materials),
+            &paths::Materials::new(&tables.materials),
             progress,
             (n, 2 * n),
         )?;

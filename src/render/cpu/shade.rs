@@ -281,19 +281,7 @@ pub(super) fn shade_at(
     let a = (0.5 * (s[0] + s[2] * dzdx)).abs() * beam.pix;
     let b = (0.5 * (s[1] + s[2] * dzdy)).abs() * beam.pix;
     let widths = (a.min(beam.max_extent), b.min(beam.max_extent));
-    let mut n = ng;
-    if let Some(ns) = &mesh.normals {
-        let c = mesh.faces[tri].map(|k| ns[k as usize]);
-        let v = [0, 1, 2].map(|d| l0 * c[0][d] + l1 * c[1][d] + l2 * c[2][d]);
-        let v = rotate(rot, V3::from(v));
-        let l = dot(v, v).sqrt();
-        if l > 1e-15 {
-            n = v / l;
-            if dot(n, ng) < 0.0 {
-                n = -n;
-            }
-        }
-    }
+    let n = mesh.shading_normal(tri, rot, [l0, l1, l2], ng);
     let (ci, co) = (dot(n, wi), dot(n, wo));
     let mut out = PixelSample {
         values: [0.0; 16],

@@ -3,7 +3,8 @@
 //! the GPU (issue 23). Its f64 twin is [`crate::render::bvh::Bvh::closest_hit`]; the tests
 //! below compare the two on lavapipe.
 
-use super::util::{create_buffer, device_error, error_scoped};
+use super::readback::map_read;
+use super::util::{create_buffer, error_scoped};
 use super::Gpu;
 use crate::error::Result;
 use crate::optics::frames::V3;
@@ -121,16 +122,7 @@ pub fn closest_hits(
         }
         enc.copy_buffer_to_buffer(&hits, 0, &read, 0, out_bytes);
         g.queue.submit([enc.finish()]);
-        let slice = read.slice(0..out_bytes);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        dev.poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| device_error(format!("device poll failed: {e}")))?;
-        let v = slice
-            .get_mapped_range()
-            .map_err(|e| device_error(format!("cannot map the hits: {e}")))?
-            .to_vec();
-        read.unmap();
-        Ok(v)
+        map_read(dev, &read, out_bytes)
     })?;
     let words: &[[f32; 4]] = bytemuck::cast_slice(&raw);
     Ok(words

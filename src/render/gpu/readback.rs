@@ -317,7 +317,7 @@ impl<'a> ResultBuffers<'a> {
 }
 
 /// The first `bytes` of the mappable buffer `b`, once the device has finished with it.
-fn map_read(dev: &wgpu::Device, b: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+pub(super) fn map_read(dev: &wgpu::Device, b: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
     let slice = b.slice(0..bytes);
     slice.map_async(wgpu::MapMode::Read, |_| {});
     dev.poll(wgpu::PollType::wait_indefinitely())

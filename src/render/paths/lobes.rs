@@ -29,11 +29,22 @@ pub trait PathBrdf: Sync {
 /// The scene's materials as the path sampler sees them (module docs: single + multiple +
 /// diffuse terms; the specular lobe's weight the white single-bounce albedo times the
 /// normal-incidence Fresnel reflectance, the depolarizing lobe's its albedo).
-pub struct Materials<'a>(pub &'a [Arc<Material>]);
+pub struct Materials<'a> {
+    mats: &'a [Arc<Material>],
+    /// Each material's unpolarized reflectance at normal incidence (once, not per path).
+    r0: Vec<f64>,
+}
+
+impl<'a> Materials<'a> {
+    pub fn new(mats: &'a [Arc<Material>]) -> Self {
+        let r0 = mats.iter().map(|m| reflectance(1.0, m.spec.eta)).collect();
+        Materials { mats, r0 }
+    }
+}
 
 impl PathBrdf for Materials<'_> {
     fn eval(&self, mat: usize, n: V3, wi: V3, wo: V3) -> Framed {
-        let mats = self.0;
+        let mats = self.mats;
         let f = |m: usize, a: V3, b: V3| {
             sum_terms_except(&mats[m], a, b, Frame::Sp, Some(Term::Double))
         };
@@ -41,12 +52,10 @@ impl PathBrdf for Materials<'_> {
     }
 
     fn lobes(&self, mat: usize, cos_o: f64, sin_o: f64) -> Option<Lobes> {
-        let m = &self.0[mat];
+        let m = &self.mats[mat];
         let terms = m.spec.terms;
         let w_spec = if terms.single {
-            let (rs, rp) = fresnel_amplitudes(1.0, m.spec.eta);
-            let r0 = 0.5 * (rs.norm_sqr() + rp.norm_sqr());
-            m.white_albedo(cos_o, sin_o).unwrap_or(1.0) * r0
+            m.white_albedo(cos_o, sin_o).unwrap_or(1.0) * self.r0[mat]
         } else {
             0.0
         };
@@ -85,8 +94,19 @@ pub fn lobes_from_weights(dist: Distribution, w_spec: f64, w_dep: f64) -> Option
     })
 }
 
+/// The lobes of the surface `v` for a path going on toward `w_out` (its angle to the
+/// shading normal).
+pub(super) fn lobes_toward(
+    brdf: &(impl PathBrdf + ?Sized),
+    v: &Vertex,
+    w_out: V3,
+) -> Option<Lobes> {
+    let s = cross(v.n, w_out);
+    brdf.lobes(v.mat, dot(v.n, w_out), dot(s, s).sqrt())
+}
+
 /// A unit vector normal to unit `n`, and a second one completing a right-handed frame.
-pub(super) fn tangents(n: V3) -> (V3, V3) {
+fn tangents(n: V3) -> (V3, V3) {
     let a = if n.x.abs() < 0.9 { V3::X } else { V3::Y };
     let t1 = normalize(cross(a, n));
     (t1, cross(n, t1))

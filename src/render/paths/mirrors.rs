@@ -25,7 +25,8 @@ pub(super) struct Mirrors {
 pub(super) struct Mirror {
     /// The surface's normal on its lit side.
     pub(super) n: V3,
-    pub(super) dist: Distribution,
+    /// Its specular lobe alone (what aiming draws from).
+    pub(super) lobe: Lobes,
     /// `P(S)`.
     pub(super) p: f64,
 }
@@ -86,7 +87,11 @@ impl Mirrors {
             }
             index_of_root.insert(root, out.list.len() as u32);
             weights.push(area[t] * ci * p_specular);
-            out.list.push(Mirror { n, dist, p: 0.0 });
+            let lobe = Lobes {
+                specular: Some(dist),
+                p_specular: 1.0,
+            };
+            out.list.push(Mirror { n, lobe, p: 0.0 });
         }
         let total: f64 = weights.iter().sum();
         if total <= 0.0 || total.is_nan() {
@@ -132,18 +137,7 @@ impl Mirrors {
 /// The density of the direction `d` (toward the mirror) drawn by aiming at `m`: that of
 /// its reflection of `wi`, `-d`, about a normal drawn from its distribution.
 pub(super) fn mirror_pdf(m: &Mirror, wi: V3, d: V3) -> f64 {
-    let h = wi - d;
-    let l = dot(h, h).sqrt();
-    if l <= 0.0 {
-        return 0.0;
-    }
-    let h = h / l;
-    let (ch, wh) = (dot(h, m.n), dot(wi, h));
-    if ch <= 0.0 || wh <= 0.0 {
-        return 0.0;
-    }
-    let nxh = cross(m.n, h);
-    m.dist.d(ch, dot(nxh, nxh).min(1.0)) * ch / (4.0 * wh)
+    pdf(&m.lobe, m.n, wi, -d)
 }
 
 /// The aimed 3-bounce path from the middle surface `v` (its throughput part `(M, x_out)`:
@@ -165,24 +159,16 @@ pub(super) fn aim(
     let wi = setup.wi;
     let j = mirrors.pick(u_pick);
     let m = &mirrors.list[j];
-    let (t1, t2) = tangents(m.n);
-    let (ch, s2h) = m.dist.sample_theta(u1);
-    let sh = s2h.max(0.0).sqrt();
-    let (sp, cp) = (2.0 * PI * u2).sin_cos();
-    let h = sh * cp * t1 + sh * sp * t2 + ch * m.n;
-    let wh = dot(wi, h);
-    if wh <= 0.0 {
-        return None;
-    }
-    let d = -(2.0 * wh * h - wi);
-    if dot(d, m.n) >= 0.0 || dot(d, v.ng) <= 0.0 || dot(d, v.n) <= 0.0 {
+    // the light leaving the mirror about its specular direction, and the way to it
+    let d = -sample(&m.lobe, m.n, wi, [0.0, u1, u2])?;
+    if dot(d, v.ng) <= 0.0 || dot(d, v.n) <= 0.0 {
         return None;
     }
     let p3 = posed.trace(v.p + posed.eps * v.ng, d)?;
     if mirrors.of_face[p3.tri] != j as u32
         || dot(p3.ng, m.n) <= 0.0
         || dot(p3.n, -d) <= 0.0
-        || !posed.lit(&p3, wi)
+        || !posed.sees(&p3, wi)
     {
         return None;
     }
@@ -193,10 +179,8 @@ pub(super) fn aim(
     }
     let f = brdf.eval(v.mat, v.n, d, w_out);
     let g = brdf.eval(p3.mat, p3.n, wi, -d);
-    let scale = dot(v.n, d) / (pdf_aim + pdf_lobe);
-    let ci = dot(p3.n, wi);
-    let fm = f.m.map(|r| r.map(|e| e * scale));
-    let gm = g.m.map(|r| r.map(|e| e * ci));
-    let m = mat_mul(&mul_rotation(&fm, basis_change(f.x_in, g.x_out, -d)), &gm);
+    let fm = scale(&f.m, dot(v.n, d) / (pdf_aim + pdf_lobe));
+    let gm = scale(&g.m, dot(p3.n, wi));
+    let m = chain(&fm, f.x_in, &gm, g.x_out, -d);
     Some(((m, f.x_out), g.x_in, (p3.p - v.p).length() - dot(p3.p, wi)))
 }

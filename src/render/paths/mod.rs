@@ -83,8 +83,8 @@ use crate::brdf::Material;
 use crate::error::{Error, Result};
 use crate::microfacet::distribution::Distribution;
 use crate::optics::frames::{cross, dot, normalize, Frame, V3};
-use crate::optics::fresnel::fresnel_amplitudes;
-use crate::optics::mueller::Mat4;
+use crate::optics::fresnel::reflectance;
+use crate::optics::mueller::{matmul, scale, Mat4};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -97,9 +97,9 @@ mod rng;
 mod transmitter;
 
 pub use lobes::{lobes_from_weights, Lobes, Materials, PathBrdf, MIN_LOBE_P};
-use lobes::{pdf, sample, tangents};
+use lobes::{lobes_toward, pdf, sample};
 use mirrors::{aim, Mirrors};
-use posed::{covered_pixels, surface_areas, Posed, Vertex};
+use posed::{covered_pixels, no_interreflections, surface_areas, Posed, Vertex};
 pub use posed::{has_no_interreflections, open_sides};
 use receiver::render_rows;
 pub use rng::{hash32, uniforms, PixelRng, DIMS};
@@ -107,19 +107,11 @@ pub use rng::{hash32, uniforms, PixelRng, DIMS};
 use rng::{sobol, sobol_directions};
 use transmitter::{render_tx_rows, TxSums};
 
-fn mat_mul(a: &Mat4, b: &Mat4) -> Mat4 {
-    let mut m = [[0.0; 4]; 4];
-    for i in 0..4 {
-        for k in 0..4 {
-            let aik = a[i][k];
-            if aik != 0.0 {
-                for j in 0..4 {
-                    m[i][j] += aik * b[k][j];
-                }
-            }
-        }
-    }
-    m
+/// The Mueller matrix of `a` after `b` along a path, `a L b`: `b`'s output is the beam
+/// propagating along `k` in the basis `x_b`, `a`'s input the same beam in the basis `x_a`
+/// (both normal to `k`), and `L` turns one basis into the other ([`basis_change`]).
+fn chain(a: &Mat4, x_a: V3, b: &Mat4, x_b: V3, k: V3) -> Mat4 {
+    matmul(&mul_rotation(a, basis_change(x_a, x_b, k)), b)
 }
 
 /// `m L(c, s)` for the Stokes rotation `L = [[1,0,0,0],[0,c,s,0],[0,-s,c,0],[0,0,0,1]]`.
@@ -164,6 +156,8 @@ struct Setup<'a> {
     edges: Vec<f64>,
     ch: usize,
     orders: usize,
+    /// Each path's share of the pixel: `4 pi delta^2 / N`.
+    weight: f64,
     strategies: Strategies,
     /// The transmitter's image plane: unit `tx_u`, `tx_v` normal to `wi` (`= X`, `Y`
     /// monostatic), spanning the same square as the receiver's.
@@ -195,58 +189,83 @@ impl Default for Strategies {
     }
 }
 
-/// The transmitter strategy's density of drawing, at the lit surface `v`, the direction
-/// `w` toward the seen one (per unit solid angle), times `|ng . wi|` (the transmitter's
-/// projected area to `v`'s area): the part of its density in the balance heuristic that
-/// is not shared with the receiver's.
-fn transmitter_density(brdf: &(impl PathBrdf + ?Sized), v: &Vertex, wi: V3, w: V3) -> f64 {
-    let c = dot(v.n, wi);
-    let s = cross(v.n, wi);
-    match brdf.lobes(v.mat, c, dot(s, s).sqrt()) {
-        Some(lobes) => pdf(&lobes, v.n, wi, w) * dot(v.ng, wi).abs(),
-        None => 0.0,
-    }
-}
-
-/// The receiver strategy's counterpart of [`transmitter_density`]: the density of drawing,
-/// at the seen surface `v`, the direction `w` toward the lit one, times `|ng . wo|`.
-fn receiver_density(brdf: &(impl PathBrdf + ?Sized), v: &Vertex, wo: V3, w: V3) -> f64 {
-    let c = dot(v.n, wo);
-    let s = cross(v.n, wo);
-    match brdf.lobes(v.mat, c, dot(s, s).sqrt()) {
-        Some(lobes) => pdf(&lobes, v.n, wo, w) * dot(v.ng, wo).abs(),
+/// The density of drawing, at the surface `v` whose path goes on toward `w_out`, the
+/// direction `w` (per unit solid angle, from `v`'s lobes about `w_out`), times
+/// `|ng . w_out|` (the projected area of the strategy's image plane to `v`'s area): the
+/// part of a strategy's density in the balance heuristic that the other does not share.
+/// The transmitter's strategy draws at the lit surface about `wi`, the receiver's at the
+/// seen one about `wo`.
+fn lobe_density(brdf: &(impl PathBrdf + ?Sized), v: &Vertex, w_out: V3, w: V3) -> f64 {
+    match lobes_toward(brdf, v, w_out) {
+        Some(lobes) => pdf(&lobes, v.n, w_out, w) * dot(v.ng, w_out).abs(),
         None => 0.0,
     }
 }
 
 impl Setup<'_> {
+    /// The point of pixel `(row, col)` of the image plane at the offsets `u[0]`, `u[1]`
+    /// (pixel units from its top-left corner, rows down).
+    fn point_in_pixel(&self, row: usize, col: usize, u: [f64; 3]) -> (f64, f64) {
+        let ext = self.lay.ext;
+        (
+            -ext + (col as f64 + u[0]) * self.pix,
+            ext - (row as f64 + u[1]) * self.pix,
+        )
+    }
+
+    /// The profile of bounce order `order` within `profile` (orders x bins x channels), or
+    /// the empty slice when no profile is kept.
+    fn order_profile<'p>(&self, profile: &'p mut [f64], order: usize) -> &'p mut [f64] {
+        let per = self.lay.n_bins * self.ch;
+        if profile.is_empty() {
+            profile
+        } else {
+            &mut profile[order * per..(order + 1) * per]
+        }
+    }
+
+    /// Add one path of the pixel, its Mueller matrix `m` from the transmitter (basis
+    /// `x_in`) to the receiver (basis `x_out`) landing at range `r`, to the pixel's sums
+    /// `px` and to `profile` (when kept); a path with a value that is not finite adds
+    /// nothing.
+    fn add_path(
+        &self,
+        px: &mut [f64; 16],
+        profile: &mut [f64],
+        m: &Mat4,
+        x_in: V3,
+        x_out: V3,
+        r: f64,
+    ) {
+        let vals = self.channels(m, x_in, x_out, self.weight);
+        if !vals.iter().all(|x| x.is_finite()) {
+            return;
+        }
+        for (a, b) in px.iter_mut().zip(&vals) {
+            *a += b;
+        }
+        if !profile.is_empty() {
+            self.deposit(profile, &vals[..self.ch], r);
+        }
+    }
+
     /// Add `vals` (channels) at range `r` to a profile (bins x channels): the pulse's
     /// weights over the bins it reaches, its tails folded into the end ones (as
     /// [`pulse::bin_weights_folded`] for a point).
     fn deposit(&self, prof: &mut [f64], vals: &[f64], r: f64) {
-        let (ch, nb) = (self.ch, self.lay.n_bins);
-        let (r_min, bw, half) = (self.lay.r_min, self.sensor.bin_width, self.lay.support);
-        let bin = |x: f64| (((x - r_min) / bw).floor().clamp(0.0, (nb - 1) as f64)) as usize;
-        let (k0, k1) = (bin(r - half), bin(r + half));
-        let mut prev = 0.0;
-        for k in k0..=k1 {
-            let c = if k < k1 {
-                let x = self.edges[k + 1] - r;
-                match &self.sensor.pulse {
-                    Some(p) => p.cdf_box2(x, 0.0, 0.0),
-                    None => pulse::cdf_gauss_box2(x, self.sensor.sigma_range, 0.0, 0.0),
-                }
-            } else {
-                1.0
-            };
-            let wt = c - prev;
-            prev = c;
+        let ch = self.ch;
+        let sigma = self.sensor.sigma_range;
+        let cdf = |x: f64| match &self.sensor.pulse {
+            Some(p) => p.cdf_box2(x, 0.0, 0.0),
+            None => pulse::cdf_gauss_box2(x, sigma, 0.0, 0.0),
+        };
+        pulse::folded_weights(r, self.lay.support, &self.edges, cdf, |k, wt| {
             if wt != 0.0 {
                 for (p, v) in prof[k * ch..(k + 1) * ch].iter_mut().zip(vals) {
                     *p += wt * v;
                 }
             }
-        }
+        });
     }
 
     /// The telescope's channels of the path matrix `m` whose input is in the basis `x_in`
@@ -306,11 +325,12 @@ pub fn render_paths_with(
     let wi = V3::new(beta.sin(), 0.0, beta.cos());
     let k_in = -wi;
     let x_in_t = normalize(cross(k_in, V3::Y));
+    let pix = 2.0 * lay.ext / sensor.resolution as f64;
     let setup = Setup {
         sensor,
         lay,
         width: sensor.resolution,
-        pix: 2.0 * lay.ext / sensor.resolution as f64,
+        pix,
         wi,
         wo: V3::Z,
         x_in_t,
@@ -320,13 +340,18 @@ pub fn render_paths_with(
             .collect(),
         ch: sensor.channels(),
         orders,
+        weight: 4.0 * PI * pix * pix / sensor.paths.samples as f64,
         strategies,
         tx_u: normalize(cross(V3::Y, wi)),
         tx_v: cross(wi, normalize(cross(V3::Y, wi))),
     };
     let (w, ch, nb) = (setup.width, setup.ch, lay.n_bins);
-    let skip = orders == 0 || has_no_interreflections(mesh);
-    let open = if skip { Vec::new() } else { open_sides(mesh) };
+    let open = if orders == 0 {
+        Vec::new()
+    } else {
+        open_sides(mesh)
+    };
+    let skip = orders == 0 || no_interreflections(mesh, &open);
     let areas = if skip {
         Vec::new()
     } else {

@@ -4,31 +4,20 @@
 
 use super::*;
 
-/// Whether no ray leaving the mesh's visible side can meet it again: every face plane has
-/// all vertices on or behind it (a closed convex mesh), or all vertices lie in one plane.
-/// Within `1e-9` of the bounding radius.
+/// Whether no ray leaving the mesh's visible side can meet it again, from its faces'
+/// [`open_sides`]: a closed mesh (only the outward sides are seen) with nothing in front of
+/// any face (convex), or an open one with nothing on either side of any face (flat).
 pub fn has_no_interreflections(mesh: &Mesh) -> bool {
-    let tol = 1e-9 * mesh.radius.max(f64::MIN_POSITIVE);
-    let vs: Vec<V3> = mesh.vertices.iter().map(|&v| V3::from(v)).collect();
-    let plane = |f: &[u32; 3]| {
-        let [a, b, c] = f.map(|k| vs[k as usize]);
-        let n = cross(b - a, c - a);
-        let l = dot(n, n).sqrt();
-        (l > 0.0).then(|| (n / l, a))
-    };
-    let flat = match mesh.faces.iter().find_map(plane) {
-        Some((n, a)) => vs.iter().all(|&v| dot(n, v - a).abs() <= tol),
-        None => true,
-    };
-    if flat {
-        return true;
+    no_interreflections(mesh, &open_sides(mesh))
+}
+
+/// [`has_no_interreflections`] from the mesh's [`open_sides`].
+pub(super) fn no_interreflections(mesh: &Mesh, open: &[[bool; 2]]) -> bool {
+    if mesh.closed {
+        open.iter().all(|s| !s[0])
+    } else {
+        open.iter().all(|s| !s[0] && !s[1])
     }
-    mesh.closed
-        && mesh
-            .faces
-            .iter()
-            .filter_map(plane)
-            .all(|(n, a)| vs.iter().all(|&v| dot(n, v - a) <= tol))
 }
 
 /// For each face, whether any vertex of the mesh lies in front of its plane (`[0]`, the side
@@ -36,7 +25,8 @@ pub fn has_no_interreflections(mesh: &Mesh) -> bool {
 /// radius: a ray leaving a face on a side with nothing there cannot meet the mesh, so no
 /// path is drawn from it. Computed per flat surface ([`Mesh::surfaces`]: one plane);
 /// where that would take more than about `5e7` vertex tests (a large smooth mesh), every
-/// side is reported open.
+/// side is reported open. A degenerate face (no plane) has no open side: no ray meets it,
+/// so no path passes through it.
 pub fn open_sides(mesh: &Mesh) -> Vec<[bool; 2]> {
     let surf = mesh.surfaces();
     let n_surf = surf
@@ -57,7 +47,7 @@ pub fn open_sides(mesh: &Mesh) -> Vec<[bool; 2]> {
             let n = cross(b - a, c - a);
             let l = dot(n, n).sqrt();
             if l <= 0.0 || l.is_nan() {
-                return [true, true];
+                return [false, false];
             }
             let n = n / l;
             let mut sides = [false, false];
@@ -147,21 +137,9 @@ impl<'a> Posed<'a> {
         if dot(ng, d) > 0.0 {
             ng = -ng;
         }
-        let mut n = ng;
-        if let Some(ns) = &self.mesh.normals {
-            let [na, nb, nc] = self.mesh.faces[hit.tri].map(|k| V3::from(ns[k as usize]));
-            let v = rotate(
-                self.rot,
-                (1.0 - hit.u - hit.v) * na + hit.u * nb + hit.v * nc,
-            );
-            let l = dot(v, v).sqrt();
-            if l > 1e-15 {
-                n = v / l;
-                if dot(n, ng) < 0.0 {
-                    n = -n;
-                }
-            }
-        }
+        let n =
+            self.mesh
+                .shading_normal(hit.tri, self.rot, [1.0 - hit.u - hit.v, hit.u, hit.v], ng);
         Some(Vertex {
             p,
             ng,
@@ -178,13 +156,15 @@ impl<'a> Posed<'a> {
         self.open[v.tri][if front { 0 } else { 1 }]
     }
 
-    /// Whether `v` sees the transmitter (toward unit `wi`) past the rest of the mesh.
-    pub(super) fn lit(&self, v: &Vertex, wi: V3) -> bool {
-        dot(v.ng, wi) > 0.0
-            && dot(v.n, wi) > 0.0
+    /// Whether `v` sees the direction `w` past the rest of the mesh, its geometric and
+    /// shading normals both facing it: the transmitter (`wi`, `v` lit) or the receiver
+    /// (`wo`, `v` seen).
+    pub(super) fn sees(&self, v: &Vertex, w: V3) -> bool {
+        dot(v.ng, w) > 0.0
+            && dot(v.n, w) > 0.0
             && !self
                 .bvh
-                .any_hit(v.p + self.eps * v.ng, wi, 0.0, f64::INFINITY, Some(v.tri))
+                .any_hit(v.p + self.eps * v.ng, w, 0.0, f64::INFINITY, Some(v.tri))
     }
 }
 

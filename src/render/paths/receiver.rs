@@ -33,8 +33,6 @@ pub(super) fn render_rows(
     };
     let ext = setup.lay.ext;
     let n = paths.samples;
-    // each path's share of the pixel: 4 pi delta^2 / N
-    let weight = 4.0 * PI * setup.pix * setup.pix / n as f64;
     let (wi, wo) = (setup.wi, setup.wo);
     for row in rows.clone() {
         for col in 0..w {
@@ -43,9 +41,7 @@ pub(super) fn render_rows(
             let rng = PixelRng::new(paths.seed, pixel);
             let n = if mask[pixel as usize] { n } else { 0 };
             for i in 0..n {
-                let u = rng.set(i, 0);
-                let x = -ext + (col as f64 + u[0]) * setup.pix;
-                let y = ext - (row as f64 + u[1]) * setup.pix;
+                let (x, y) = setup.point_in_pixel(row, col, rng.set(i, 0));
                 let Some(v1) = posed.trace(V3::new(x, y, 2.0 * ext), -V3::Z) else {
                     continue;
                 };
@@ -68,9 +64,7 @@ pub(super) fn render_rows(
                         break;
                     }
                     // draw the direction toward the next surface at `v`
-                    let c = dot(v.n, w_out);
-                    let s = cross(v.n, w_out);
-                    let Some(lobes) = brdf.lobes(v.mat, c, dot(s, s).sqrt()) else {
+                    let Some(lobes) = lobes_toward(brdf, &v, w_out) else {
                         break;
                     };
                     if order == 1 && !mirrors.list.is_empty() {
@@ -85,20 +79,11 @@ pub(super) fn render_rows(
                             &lobes,
                             rng.set(i, 3),
                         );
-                        if let Some((m, x_in, r3)) = aimed {
-                            let m = mat_mul(&mul_rotation(&t, basis_change(x_t, m.1, w_out)), &m.0);
-                            let vals = setup.channels(&m, x_in, x_out1, weight);
-                            if vals.iter().all(|x| x.is_finite()) {
-                                for (a, b) in px[order].iter_mut().zip(&vals) {
-                                    *a += b;
-                                }
-                                if outputs.profile {
-                                    let r = 0.5 * (length + r3);
-                                    let prof =
-                                        &mut out.profile[order * nb * ch..(order + 1) * nb * ch];
-                                    setup.deposit(prof, &vals[..ch], r);
-                                }
-                            }
+                        if let Some(((m, x_m), x_in, r3)) = aimed {
+                            let m = chain(&t, x_t, &m, x_m, w_out);
+                            let prof = setup.order_profile(&mut out.profile, order);
+                            let r = 0.5 * (length + r3);
+                            setup.add_path(&mut px[order], prof, &m, x_in, x_out1, r);
                         }
                     }
                     let [u1, u2, u_lobe] = rng.set(i, 1 + order as u32);
@@ -117,28 +102,26 @@ pub(super) fn render_rows(
                         break;
                     };
                     let f = brdf.eval(v.mat, v.n, w_next, w_out);
-                    let scale = dot(v.n, w_next) / p;
-                    let fm = f.m.map(|r| r.map(|e| e * scale));
+                    let fm = scale(&f.m, dot(v.n, w_next) / p);
                     if order == 0 {
                         t = fm;
                         x_out1 = f.x_out;
                     } else {
                         // the beam v -> previous surface: in f's output basis, into t's input
-                        t = mat_mul(&mul_rotation(&t, basis_change(x_t, f.x_out, w_out)), &fm);
+                        t = chain(&t, x_t, &fm, f.x_out, w_out);
                     }
                     x_t = f.x_in;
                     length += dot(next.p - v.p, next.p - v.p).sqrt();
                     // next-event: `next` lit by the transmitter, seen from `v` along -w_next
                     let back = -w_next;
                     let drawn = order > 0 || setup.strategies.receiver;
-                    if drawn && dot(next.n, back) > 0.0 && posed.lit(&next, wi) {
+                    if drawn && dot(next.n, back) > 0.0 && posed.sees(&next, wi) {
                         let g = brdf.eval(next.mat, next.n, wi, back);
                         let ci = dot(next.n, wi);
                         // a 2-bounce path is also drawn from the transmitter's side
                         let mis = if order == 0 && setup.strategies.transmitter {
                             let a = dot(v.ng, wo).abs() * p * dot(next.ng, back).abs();
-                            let b = transmitter_density(brdf, &next, wi, back)
-                                * dot(v.ng, w_next).abs();
+                            let b = lobe_density(brdf, &next, wi, back) * dot(v.ng, w_next).abs();
                             if a > 0.0 {
                                 a / (a + b)
                             } else {
@@ -151,19 +134,11 @@ pub(super) fn render_rows(
                         } else {
                             1.0
                         };
-                        let gm = g.m.map(|r| r.map(|e| e * ci * mis));
-                        let m = mat_mul(&mul_rotation(&t, basis_change(x_t, g.x_out, back)), &gm);
-                        let vals = setup.channels(&m, g.x_in, x_out1, weight);
-                        if vals[0].is_finite() && vals.iter().all(|x| x.is_finite()) {
-                            for (a, b) in px[order].iter_mut().zip(&vals) {
-                                *a += b;
-                            }
-                            if outputs.profile {
-                                let r = 0.5 * (length - dot(next.p, wi));
-                                let prof = &mut out.profile[order * nb * ch..(order + 1) * nb * ch];
-                                setup.deposit(prof, &vals[..ch], r);
-                            }
-                        }
+                        let gm = scale(&scale(&g.m, ci), mis);
+                        let m = chain(&t, x_t, &gm, g.x_out, back);
+                        let prof = setup.order_profile(&mut out.profile, order);
+                        let r = 0.5 * (length - dot(next.p, wi));
+                        setup.add_path(&mut px[order], prof, &m, g.x_in, x_out1, r);
                     }
                     if dot(next.n, back) <= 0.0 {
                         break;

@@ -182,7 +182,7 @@ fn conductor_dihedral_second_bounce_turns_linear_states_as_the_smooth_dihedral()
             &sensor,
             &[view(0.0, phi)],
             ALL,
-            &Materials(&mats),
+            &Materials::new(&mats),
             None,
             (0, 1),
         )
@@ -231,7 +231,16 @@ fn dihedral_second_bounce_lands_at_the_edge_range() {
     for t_deg in [0.0f64, 15.0] {
         let sensor = sensor_with(32, 2, 16, 1);
         let rot = view(t_deg.to_radians(), 0.0);
-        let s = render_paths(&mesh, &sensor, &[rot], ALL, &Materials(&mats), None, (0, 1)).unwrap();
+        let s = render_paths(
+            &mesh,
+            &sensor,
+            &[rot],
+            ALL,
+            &Materials::new(&mats),
+            None,
+            (0, 1),
+        )
+        .unwrap();
         let lay = Layout::new(&mesh, &sensor);
         let (ch, nb) = (16, lay.n_bins);
         let prof: Vec<f64> = (0..nb).map(|k| s[0].profile[k * ch]).collect();
@@ -496,7 +505,7 @@ fn aiming_at_mirrors_keeps_the_third_bounce_and_cuts_its_noise() {
                     &sensor_with(32, 3, 16, seed),
                     &rot,
                     ALL,
-                    &Materials(&mats),
+                    &Materials::new(&mats),
                     None,
                     (0, 1),
                     st,

@@ -37,7 +37,6 @@ pub(super) fn render_tx_rows(
     };
     let ext = setup.lay.ext;
     let n = paths.samples;
-    let weight = 4.0 * PI * setup.pix * setup.pix / n as f64;
     let (wi, wo) = (setup.wi, setup.wo);
     let seed = hash32(paths.seed ^ TX_SALT);
     for row in rows {
@@ -48,9 +47,7 @@ pub(super) fn render_tx_rows(
             }
             let rng = PixelRng::new(seed, pixel);
             for i in 0..n {
-                let u = rng.set(i, 0);
-                let x = -ext + (col as f64 + u[0]) * setup.pix;
-                let y = ext - (row as f64 + u[1]) * setup.pix;
+                let (x, y) = setup.point_in_pixel(row, col, rng.set(i, 0));
                 let o = x * setup.tx_u + y * setup.tx_v + 2.0 * ext * wi;
                 let Some(v2) = posed.trace(o, -wi) else {
                     continue;
@@ -59,8 +56,7 @@ pub(super) fn render_tx_rows(
                 if c2 <= 0.0 || !posed.side_open(&v2) {
                     continue;
                 }
-                let s2 = cross(v2.n, wi);
-                let Some(lobes) = brdf.lobes(v2.mat, c2, dot(s2, s2).sqrt()) else {
+                let Some(lobes) = lobes_toward(brdf, &v2, wi) else {
                     continue;
                 };
                 let [u1, u2, u_lobe] = rng.set(i, 1);
@@ -75,16 +71,7 @@ pub(super) fn render_tx_rows(
                     continue;
                 };
                 let w1 = -w2; // at the seen surface, toward the lit one
-                if dot(v1.n, w1) <= 0.0 || dot(v1.n, wo) <= 0.0 || dot(v1.ng, wo) <= 0.0 {
-                    continue;
-                }
-                if posed.bvh.any_hit(
-                    v1.p + posed.eps * v1.ng,
-                    wo,
-                    0.0,
-                    f64::INFINITY,
-                    Some(v1.tri),
-                ) {
+                if dot(v1.n, w1) <= 0.0 || !posed.sees(&v1, wo) {
                     continue;
                 }
                 // the image pixel it is seen in
@@ -97,7 +84,7 @@ pub(super) fn render_tx_rows(
                 }
                 let b = dot(v2.ng, wi).abs() * p2 * dot(v1.ng, w1).abs();
                 let mis = if setup.strategies.receiver {
-                    let a = receiver_density(brdf, &v1, wo, w1) * dot(v2.ng, w2).abs();
+                    let a = lobe_density(brdf, &v1, wo, w1) * dot(v2.ng, w2).abs();
                     b / (a + b)
                 } else {
                     1.0
@@ -105,14 +92,11 @@ pub(super) fn render_tx_rows(
                 // f1 (w1 -> wo) L f2 (wi -> w2), the beam v2 -> v1 propagating along w2
                 let f2 = brdf.eval(v2.mat, v2.n, wi, w2);
                 let f1 = brdf.eval(v1.mat, v1.n, w1, wo);
-                let m = mat_mul(
-                    &mul_rotation(&f1.m, basis_change(f1.x_in, f2.x_out, w2)),
-                    &f2.m,
-                );
+                let m = chain(&f1.m, f1.x_in, &f2.m, f2.x_out, w2);
                 // (n2.wi)(n1.w1) |ng2.w2| |ng1.wo| / (|ng1.w1| |ng2.wi| pdf2)
                 let g = c2 * dot(v1.n, w1) * dot(v2.ng, w2).abs() * dot(v1.ng, wo).abs()
                     / (dot(v1.ng, w1).abs() * dot(v2.ng, wi).abs() * p2);
-                let vals = setup.channels(&m, f2.x_in, f1.x_out, weight * g * mis);
+                let vals = setup.channels(&m, f2.x_in, f1.x_out, setup.weight * g * mis);
                 if !vals.iter().all(|x| x.is_finite()) {
                     continue;
                 }

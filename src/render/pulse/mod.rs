@@ -418,19 +418,36 @@ pub fn bin_weights_folded(
     out: &mut [f64],
 ) {
     assert_eq!(out.len() + 1, edges.len(), "need one more edge than bins");
-    let nb = out.len();
+    out.iter_mut().for_each(|o| *o = 0.0);
+    folded_weights(
+        r0,
+        half_w,
+        edges,
+        |x| cdf_gauss_box2(x, sigma, a, b),
+        |k, w| out[k] = w,
+    );
+}
+
+/// The weights of [`bin_weights_folded`] for any pulse, visited without touching the other
+/// bins: `visit(k, w)` for each bin `k0..=k1` that `[r0 - half_w, r0 + half_w]` reaches,
+/// with `w = C(e_{k+1} - r0) - C(e_k - r0)` and the tails folded into the end bins (they sum
+/// to exactly 1); `cdf` is `C`, the pulse convolved with the footprint, at an offset from
+/// `r0`. `edges` are `r_min + k bin_width` (at least two).
+pub fn folded_weights(
+    r0: f64,
+    half_w: f64,
+    edges: &[f64],
+    cdf: impl Fn(f64) -> f64,
+    mut visit: impl FnMut(usize, f64),
+) {
+    let nb = edges.len() - 1;
     let (r_min, bw) = (edges[0], edges[1] - edges[0]);
     let bin = |r: f64| (((r - r_min) / bw).floor().clamp(0.0, (nb - 1) as f64)) as usize;
     let (k0, k1) = (bin(r0 - half_w), bin(r0 + half_w));
-    out.iter_mut().for_each(|o| *o = 0.0);
     let mut prev = 0.0;
     for k in k0..=k1 {
-        let c = if k < k1 {
-            cdf_gauss_box2(edges[k + 1] - r0, sigma, a, b)
-        } else {
-            1.0
-        };
-        out[k] = c - prev;
+        let c = if k < k1 { cdf(edges[k + 1] - r0) } else { 1.0 };
+        visit(k, c - prev);
         prev = c;
     }
 }
