@@ -5,20 +5,26 @@ side-on with its axis at 0 to 90 deg (5 deg steps) to the image rows, rendered a
 ``"balanced"`` preset (161 pixels across, 8 samples per pixel, pixel ~3.7 mm). The facet
 sum is ``4 pi f(wo, wo) cos^2(theta) A`` over the facets turned toward the sensor (all
 fully visible on a convex prism). Prints one line per angle: the relative error of
-``balanced``, of 16 samples per pixel, and of ``coverage="analytic"``; ``--write`` also
-writes the table to docs/thin-parts.md.
+``balanced``, of 16 samples per pixel, of ``coverage="analytic"`` and of one sample per
+pixel (``"fast"``'s sampling); then the render benchmark's CubeSat's cost at 1, 8 and 16
+samples per pixel (:func:`cubesat_cost`); ``--write`` also writes both to
+docs/thin-parts.md.
 
     python scripts/thin_wire.py [--write]
 
-This measures a known defect (issue 23's thin-part item): every pixel uses the same sample
-pattern, so a part narrower than a pixel and aligned with the pixel grid (or its
-diagonal) is hit by the same samples all along, and its coverage error does not average
-out; analytic coverage finds such a part only where a nearby pixel centre sees it.
+Every pixel has the same sample pattern, so a part narrower than a pixel and aligned with
+the pixel grid (or its diagonal) meets the same samples all along, and its coverage error
+does not average out (a wire between two rows of samples is not seen at all). With more
+than one sample per pixel (the pixels shaded on the CPU, render::cpu::add_thin_pixels), and
+with analytic coverage (in the kernel), the pixels a thin face overlaps take its area
+exactly (src/render/thin.rs); one sample per pixel is left as it was, and its column shows
+what that costs in accuracy.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -63,20 +69,54 @@ def errors(radius: float, lidar: pprender.Lidar, degrees: np.ndarray) -> np.ndar
     return got / want - 1
 
 
+def cubesat_cost(repeats: int = 3) -> list[str]:
+    """Milliseconds per attitude of the render benchmark's 3U CubeSat (128x128, Stokes
+    profile only, lavapipe, 16 random attitudes, best of ``repeats``) at 1, 8 and 16
+    samples per pixel, in one run: what the thin-part pixels cost where a mesh has them."""
+    import time
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_render import cubesat_scene
+
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(16, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    scene = cubesat_scene()
+    rows = ["| samples per pixel | ms per attitude | relative to 1 |", "|---|---|---|"]
+    base = None
+    for k in (1, 8, 16):
+        lidar = pprender.Lidar(resolution=128, pixel_samples=k, polarization=[1, 1, 0, 0])
+        pprender.render(scene, lidar, q[:2], outputs=("profile",), device="cpu")
+        best = math.inf
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            pprender.render(scene, lidar, q, outputs=("profile",), device="cpu")
+            best = min(best, time.perf_counter() - t0)
+        ms = 1e3 * best / len(q)
+        base = base or ms
+        rows.append(f"| {k} | {ms:.1f} | {ms / base:.1f}x |")
+    return rows
+
+
 def main(argv: list[str]) -> None:
     degrees = np.arange(0, 91, 5)
     cols = {"3 mm balanced": errors(0.0015, pprender.Lidar(), degrees),
             "1 mm balanced": errors(0.0005, pprender.Lidar(), degrees),
             "3 mm, 16 samples": errors(0.0015, pprender.Lidar(pixel_samples=16), degrees),
-            "3 mm analytic": errors(0.0015, pprender.Lidar(coverage="analytic"), degrees)}
+            "3 mm analytic": errors(0.0015, pprender.Lidar(coverage="analytic"), degrees),
+            "3 mm, 1 sample": errors(0.0015, pprender.Lidar(pixel_samples=1), degrees)}
     lines = ["# Thin parts: a wire against the sum over its facets", "",
-             "Written by `python scripts/thin_wire.py --write` (its docstring: the scene and the known "
-             "defect it measures). Relative error of the total cross-section, by the angle of the wire's "
+             "Written by `python scripts/thin_wire.py --write` (its docstring: the scene, and how thin "
+             "parts are rendered). Relative error of the total cross-section, by the angle of the wire's "
              "axis to the image rows:", "",
              "| deg | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for i, d in enumerate(degrees):
-        lines.append(f"| {d} | " + " | ".join(f"{c[i]:+.4f}" for c in cols.values()) + " |")
-    lines.append("| worst | " + " | ".join(f"{np.abs(c).max():.4f}" for c in cols.values()) + " |")
+        lines.append(f"| {d} | " + " | ".join(f"{c[i]:+.1e}" for c in cols.values()) + " |")
+    lines.append("| worst | " + " | ".join(f"{np.abs(c).max():.1e}" for c in cols.values()) + " |")
+    lines += ["", "Cost on the render benchmark's 3U CubeSat (`benchmarks/bench_render.py`'s scene: panel "
+              "rims and the whip antenna are thin at 128x128), 128x128, Stokes profile only, on lavapipe "
+              f"({os.cpu_count()} CPU threads), one run:", ""]
+    lines += cubesat_cost()
     lines += ["", f"pprender {pprender.__version__}.", ""]
     text = "\n".join(lines)
     print(text)

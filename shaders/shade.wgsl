@@ -123,6 +123,20 @@ struct Params {
 // (width + 2)^2 texels, one per raster pass of each attitude (gather.wgsl); tri_ids is then
 // a placeholder, as this is otherwise
 @group(0) @binding(10) var<storage, read> sample_ids: array<u32>;
+// The pixels with thin faces (render::thin::gpu_words, per chunk): thin[0] their number
+// (0: none, and this is a placeholder), thin[1 + pixel index] 0 or the position p of the
+// pixel's faces (thin[p] of them, thin[p + 1 ..]). With SAMPLES > 1 such a pixel is left
+// empty here and shaded on the CPU (render::cpu::add_thin_pixels); analytic coverage
+// takes its faces as candidates.
+@group(0) @binding(11) var<storage, read> thin: array<u32>;
+
+// Position of the thin faces of pixel `pix_index` ((layer height + row) width + col), 0: none.
+fn thin_list(pix_index: u32) -> u32 {
+    if (thin[0] == 0u) {
+        return 0u;
+    }
+    return thin[1u + pix_index];
+}
 
 var<workgroup> wg_sum: array<f32, 1024>;
 
@@ -456,11 +470,39 @@ fn sample_id(col: u32, row: u32, layer: u32, k: u32) -> u32 {
     return sample_ids[(((layer * (SAMPLES / 4u) + k / 4u) * side + y) * side + x) * 4u + k % 4u];
 }
 
+// Append pixel (col, row)'s thin faces (binding 11) to queue[0..n) (those not already
+// there): the new count, or OVERFLOW when they do not fit in MAX_QUEUE.
+fn add_thin(col: u32, row: u32, layer: u32, queue: ptr<function, array<u32, 64>>,
+            n: u32) -> u32 {
+    let p = thin_list((layer * params.height + row) * params.width + col);
+    if (p == 0u) {
+        return n;
+    }
+    var m = n;
+    let count = thin[p];
+    for (var i = 0u; i < count; i++) {
+        let t = thin[p + 1u + i];
+        var j = 0u;
+        while (j < n && (*queue)[j] != t) {
+            j++;
+        }
+        if (j == n) {
+            if (m == MAX_QUEUE) {
+                return OVERFLOW;
+            }
+            (*queue)[m] = t;
+            m++;
+        }
+    }
+    return m;
+}
+
 fn pixel_parts(col: u32, row: u32, layer: u32, cap: f32,
                out: ptr<function, array<f32, 16>>, acc: ptr<function, PixelAcc>) {
     if (COVERAGE) {
-        // candidates: the distinct triangles seen at the 3x3 neighbourhood's centres
-        var cand: array<u32, 9>;
+        // candidates: the distinct triangles seen at the 3x3 neighbourhood's centres, then
+        // the pixel's thin faces
+        var cand: array<u32, 64>;
         var n_cand = 0u;
         var n_hit = 0u;
         for (var dr = -1; dr <= 1; dr++) {
@@ -485,17 +527,21 @@ fn pixel_parts(col: u32, row: u32, layer: u32, cap: f32,
                 }
             }
         }
-        if (n_cand == 1u && n_hit == 9u) {
+        let n_listed = add_thin(col, row, layer, &cand, n_cand);
+        if (n_cand == 1u && n_hit == 9u && n_listed == n_cand) {
             // one triangle at all nine centres contains their hull, so the whole pixel
             shade_part(layer, col, row, Part(cand[0], 1.0, vec2<f32>(0.5), vec2<f32>(1.0)),
                        cap, out, acc);
             return;
         }
-        if (n_cand == 0u) {
+        if (n_listed == 0u) {
             return;
         }
         var parts: array<Part, 32>;
-        var n_parts = coverage_parts(col, row, layer, cand, n_cand, &parts);
+        var n_parts = OVERFLOW;
+        if (n_listed != OVERFLOW) {
+            n_parts = coverage_parts(col, row, layer, cand, n_cand, n_listed, &parts);
+        }
         if (n_parts == OVERFLOW) {
             // too many triangles: the centre sample, as with one sample per pixel
             let id = textureLoad(tri_ids, vec2<i32>(i32(col), i32(row)), i32(layer), 0).x;
@@ -530,6 +576,16 @@ fn pixel_parts(col: u32, row: u32, layer: u32, cap: f32,
         }
         return;
     }
+    // a pixel with thin faces is the CPU's (render::cpu::add_thin_pixels)
+    if (thin_list((layer * params.height + row) * params.width + col) != 0u) {
+        return;
+    }
+    sampled_groups(col, row, layer, cap, out, acc);
+}
+
+// The parts of pixel (col, row) from its SAMPLES > 1 visibility samples (pixel_parts).
+fn sampled_groups(col: u32, row: u32, layer: u32, cap: f32,
+                  out: ptr<function, array<f32, 16>>, acc: ptr<function, PixelAcc>) {
     let n_s = SAMPLES;
     // the triangle (id + 1) and the flat surface (Mesh::surfaces, + 1) each sample sees
     var ids: array<u32, MAX_SAMPLES>;

@@ -192,7 +192,11 @@ def test_nose_on_cone_profile_is_a_linear_ramp():
 @pytest.mark.parametrize("units,k", [("1U", 1), ("3U", 1), ("3U", 8)])
 def test_coverage_and_range_match_trimesh_ray_casting(units, k):
     """Coverage (the fraction of a pixel's visibility samples that hit) and range (their
-    mean) against embree rays cast through the same sample points."""
+    mean) against embree rays cast through the same sample points. With K > 1 the pixels
+    that a face thinner than a pixel overlaps (panel rims, the antenna) take their thin
+    faces' exact areas instead (src/render/thin.rs; exact against the facet sum in
+    tests/test_thin.py): their coverage is not a whole number of samples, and they are
+    compared loosely here."""
     mesh = models.cubesat(units=units, detail=3)
     mats = {p: pprender.Material("beckmann", alpha=0.3, eta=1.5 + 0j) for p in mesh.metadata["pprender_parts"]}
     scene = pprender.Scene(mesh, mats)
@@ -215,13 +219,23 @@ def test_coverage_and_range_match_trimesh_ray_casting(units, k):
             want = r.reshape(n, n, k).sum(axis=2) / hit.reshape(n, n, k).sum(axis=2)
         got, cov_g = res.range[i], res.coverage[i]
         assert np.isnan(got).sum() == (cov_g == 0).sum()
+        # thin-part pixels (K > 1): coverage an exact area; a minority of the covered
+        # pixels, within a few samples of the samples' count (the sliver's exact area
+        # against the rows of samples it crosses), their ranges (area-weighted, not the
+        # samples' mean) on the mesh
+        thin = scene._core.thin_pixels(R[None], n)[0] & (k > 1)
+        covered = (cov_g > 0) | (cov_t > 0)
+        assert (k == 1) == (thin.sum() == 0)
+        assert thin.sum() < 0.25 * covered.sum(), (thin.sum(), covered.sum())
+        assert np.all(np.abs(cov_g - cov_t)[thin] <= 3.0 / k)
+        assert np.all(np.abs(got[thin & (cov_g > 0)]) <= res.extent)
         # a sample on a silhouette edge may resolve either way (the rasterizer snaps vertices
         # to 1/256 pixel): its pixel's coverage is then off by exactly one sample, 1/k;
         # allow 0.5% of the pixels
-        diff = cov_t != cov_g
+        diff = (cov_t != cov_g) & ~thin
         assert np.mean(diff) < 5e-3
         np.testing.assert_allclose(np.abs(cov_t - cov_g)[diff], 1.0 / k, rtol=1e-6)
-        both = ~diff & (cov_t > 0)
+        both = ~diff & ~thin & (cov_t > 0)
         d = np.abs(got[both] - want[both])
         # f32 ranges on the GPU; rare mismatches where two surfaces meet at a sample point
         assert np.mean(d < 1e-5) > 0.995
@@ -412,7 +426,8 @@ def test_a_finely_tessellated_plate_renders_as_a_coarse_one():
     assert tie.sum() <= 2 and np.all(a.coverage[tie] < 1) and np.all(b.coverage[tie] < 1)
     slack = np.abs(a.stokes[tie][:, 0]).sum() + np.abs(b.stokes[tie][:, 0]).sum()
     np.testing.assert_allclose(b.profile, a.profile, rtol=0, atol=1e-6 * total + slack)
-    np.testing.assert_allclose(b.cross_section, a.cross_section, rtol=1e-6 + slack / total)
+    # (S1 and S2 are zero to rounding, 1e-20 of S0: compared against the total)
+    np.testing.assert_allclose(b.cross_section, a.cross_section, rtol=0, atol=(1e-6 + slack / total) * total)
     np.testing.assert_array_equal(np.isnan(b.range), np.isnan(a.range))
     for scene, full in ((coarse, a), (fine, b)):
         only = pprender.render(scene, sensor, att, outputs=("cross_section",))

@@ -111,7 +111,7 @@ def test_progress_reports_and_an_exception_stops_the_render(kw) -> None:
 
 @pytest.mark.parametrize("kw, stages", [
     (dict(), ["tables", "device context", "plan", "pipeline and buffers", "encode and submit", "device",
-              "readback", "to NumPy"]),
+              "readback", "thin pixels (CPU)", "to NumPy"]),
     (dict(arithmetic="f64"), ["tables", "render", "to NumPy"]),
     (dict(quality="reference"), ["render", "to NumPy"]),
 ])

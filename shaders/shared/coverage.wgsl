@@ -123,32 +123,30 @@ struct Part {
     span: vec2<f32>,
 }
 
-// The parts of pixel (col, row) of attitude `layer` under analytic coverage, from the
-// `n_seed` distinct triangles seen at its 3x3 neighbourhood's centres (scan order).
-// Candidates: the seeds and, breadth first, the edge neighbours (mesh adjacency, after the
-// normals in `geometry`) of every seed and of every candidate that overlaps the pixel, at
-// most MAX_QUEUE examined (so the triangles of a surface that hold no centre are found
-// through the ones that do); back faces are skipped on closed meshes (the raster culls
-// them). Each candidate overlapping the pixel (at most MAX_CAND) is clipped to it; its
-// visible part is that clip minus every other candidate that overlaps it and is nearer
-// at the centroid of their overlap (ties: the lower id is nearer), kept as at most
-// MAX_PIECES convex pieces. Exact for triangles that do not intersect. Returns the
-// number of parts written to `parts` (in candidate order), or OVERFLOW when more than
-// MAX_QUEUE triangles were to be examined or more than MAX_CAND overlap the pixel (a
-// vertex shared by dozens of triangles, a fan's apex); the caller then falls back to the
-// pixel-centre sample.
-fn coverage_parts(col: u32, row: u32, layer: u32, seeds: array<u32, 9>, n_seed: u32,
-                  parts: ptr<function, array<Part, 32>>) -> u32 {
+// The parts of pixel (col, row) of attitude `layer` under exact hidden-surface clipping.
+// Candidates: queue[0..n_seed) (the seeds: triangles seen at the pixel's samples or its
+// neighbourhood's centres), queue[n_seed..n_listed) (the pixel's thin faces, listed by
+// render::thin::ThinPixels, none of them a seed) and, breadth first, the edge neighbours
+// (mesh adjacency, after the normals in `geometry`) of every seed and of every other
+// candidate that overlaps the pixel, not of the listed ones (at most MAX_QUEUE examined;
+// so the triangles of a surface that hold no sample are found through the ones that do);
+// back faces are skipped on closed meshes (the raster culls them). Each candidate
+// overlapping the pixel (at most MAX_CAND) is clipped to it; its visible part is that
+// clip minus every other candidate that overlaps it and is nearer at the centroid of
+// their overlap (ties: the lower id is nearer), kept as at most MAX_PIECES convex pieces.
+// Exact for triangles that do not intersect. Returns the number of parts written to
+// `parts` (in candidate order), or OVERFLOW when more than MAX_QUEUE triangles were to be
+// examined or more than MAX_CAND overlap the pixel (a vertex shared by dozens of
+// triangles, a fan's apex); the caller then falls back to its samples.
+fn coverage_parts(col: u32, row: u32, layer: u32, queue_in: array<u32, 64>, n_seed: u32,
+                  n_listed: u32, parts: ptr<function, array<Part, 32>>) -> u32 {
     let rot = rotations[layer];
     let x0 = -params.ext + f32(col) * params.pix;
     let y0 = params.ext - f32(row) * params.pix;
     let inv = 1.0 / params.pix;
     let adj_base = 3u * params.n_tri * (1u + params.has_normals);
-    var queue: array<u32, 64>;
-    for (var i = 0u; i < n_seed; i++) {
-        queue[i] = seeds[i];
-    }
-    var n_q = n_seed;
+    var queue = queue_in;
+    var n_q = n_listed;
     var q: array<array<vec2<f32>, 3>, 32>;
     var sg: array<f32, 32>;
     var zs: array<vec3<f32>, 32>;
@@ -181,7 +179,7 @@ fn coverage_parts(col: u32, row: u32, layer: u32, seeds: array<u32, 9>, n_seed: 
             tri[n_c] = t;
             n_c++;
         }
-        if (overlaps || qi < n_seed) {
+        if (qi < n_seed || (overlaps && qi >= n_listed)) {
             let nb = bitcast<vec4<u32>>(geometry[adj_base + t]);
             for (var k = 0u; k < 3u; k++) {
                 let u = nb[k];

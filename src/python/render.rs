@@ -316,6 +316,30 @@ impl PyRenderScene {
         })
     }
 
+    /// The pixels that a face thinner than a pixel overlaps (`crate::render::thin`), which
+    /// `K > 1` samples render by exact clipping, at each attitude of `rotations` (as
+    /// `render`) in an image `width` pixels across: a bool array (n, width, width).
+    fn thin_pixels<'py>(
+        &self,
+        py: Python<'py>,
+        rotations: PyReadonlyArrayDyn<'py, f64>,
+        width: usize,
+    ) -> PyResult<Bound<'py, numpy::PyArray3<bool>>> {
+        use crate::render::thin::{face_thinness, thin_pixel_mask};
+        if width == 0 {
+            return Err(crate::Error::param("width", width, "a positive number of pixels").into());
+        }
+        let rots = attitudes(rotations)?;
+        let a = face_thinness(&self.mesh);
+        let masks: Vec<bool> = rots
+            .iter()
+            .flat_map(|r| thin_pixel_mask(&self.mesh, &a, r, width))
+            .collect();
+        Ok(Array3::from_shape_vec((rots.len(), width, width), masks)
+            .expect("n x width x width values")
+            .into_pyarray(py))
+    }
+
     /// Render a batch: `rotations` (n, 3, 3) body -> telescope, or (n, 4) unit quaternions
     /// `(w, x, y, z)`, as `request` asks ([`PyRenderRequest`]). Returns a dict of arrays,
     /// `table_seconds`, the time spent building the materials' tables in this call (0 when

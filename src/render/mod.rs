@@ -8,7 +8,8 @@
 //! twins and the exact reference); [`samples`] and [`downsample`]: the pixel's sample
 //! pattern and the supersampling reduction both backends share; [`geometry`]: meshes and
 //! attitudes; [`pulse`]: pulse shapes and bin weights; [`tables`]: a scene's material
-//! tables, cached per bistatic angle; [`bvh`] and [`paths`]: ray casting and the
+//! tables, cached per bistatic angle; [`thin`]: the faces thinner than a pixel and the
+//! pixels they overlap; [`bvh`] and [`paths`]: ray casting and the
 //! inter-reflections between parts (2 and 3 bounces, on the CPU for every backend). The
 //! GPU-vs-CPU tests are in `compare_gpu_cpu.rs`.
 //!
@@ -39,7 +40,12 @@
 //! counts for `c / K` of the pixel's area and is shaded once, on the plane of the triangle
 //! its first sample sees, at the mean of its samples' points; a pixel whose samples all
 //! see one surface is shaded at its centre for its whole area. The coverage output is the
-//! covered fraction of the samples, the range their mean.
+//! covered fraction of the samples, the range their mean. Exception, with `K > 1`: a pixel
+//! that a face thinner than a pixel in projection overlaps ([`thin`]) takes those faces'
+//! visible areas by exact clipping (each shaded at its centroid) and shares the rest of
+//! its area among the surfaces its other samples see ([`cpu::thin_parts`], on the CPU for
+//! every backend); its coverage output is the summed area. Analytic coverage takes such
+//! faces as candidates.
 //!
 //! **Illumination and cast shadows.** A visible point is lit when `cos(theta_i) > 0` and
 //! `cos(theta_o) > 0` (shading normal) and, bistatic (`beta > 0`), it is not in the
@@ -108,6 +114,7 @@ pub mod pulse;
 pub mod request;
 pub mod samples;
 pub mod tables;
+pub mod thin;
 #[cfg(test)]
 pub(crate) mod test_scenes;
 

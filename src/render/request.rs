@@ -108,7 +108,7 @@ pub fn render(
             (r, "f64 twin (CPU, BRDF tables)".to_string(), t)
         }
         Backend::Gpu(choice) => {
-            let (packed, built) = tables.get_with(beta, table_options)?;
+            let (packed, f64_tables, built) = tables.get_with_tables(beta, table_options)?;
             let t = seconds(built);
             let started = std::time::Instant::now();
             let g = gpu::context(choice)?;
@@ -124,6 +124,18 @@ pub fn render(
             )?;
             r.stage_seconds
                 .splice(0..0, [("tables", t), ("device context", context)]);
+            // the pixels with thin faces, which the device leaves to the CPU
+            let started = std::time::Instant::now();
+            cpu::add_thin_pixels(
+                &mut r,
+                mesh,
+                sensor,
+                rotations,
+                outputs,
+                &cpu::Tables(&f64_tables),
+            );
+            r.stage_seconds
+                .push(("thin pixels (CPU)", started.elapsed().as_secs_f64()));
             (r, g.info.name.clone(), t)
         }
     };

@@ -154,3 +154,34 @@ pub fn sphere_and_plate() -> Mesh {
     let nf = f.len();
     Mesh::new(v, f, Some(nrm), vec![0; nf], 1).unwrap()
 }
+
+/// A closed, flat-shaded prism of `sections` sides about body `z` (radius `r`, length
+/// `len`, centred at the origin; end caps fanned from their centres): a wire.
+pub fn wire(r: f64, len: f64, sections: usize) -> Mesh {
+    let mut v = vec![];
+    for z in [-len / 2.0, len / 2.0] {
+        for j in 0..sections {
+            let ph = 2.0 * std::f64::consts::PI * j as f64 / sections as f64;
+            v.push([r * ph.cos(), r * ph.sin(), z]);
+        }
+    }
+    let n = sections as u32;
+    v.push([0.0, 0.0, -len / 2.0]);
+    v.push([0.0, 0.0, len / 2.0]);
+    let mut f = vec![];
+    for j in 0..n {
+        let k = (j + 1) % n;
+        f.push([j, k, n + k]);
+        f.push([j, n + k, n + j]);
+        f.push([2 * n, k, j]);
+        f.push([2 * n + 1, n + j, n + k]);
+    }
+    let nf = f.len();
+    Mesh::new(v, f, None, vec![0; nf], 1).unwrap()
+}
+
+/// Body `x` toward the sensor and body `z` (a [`wire`]'s axis) at `phi` to the image's `X`.
+pub fn wire_view(phi: f64) -> Rot {
+    let (c, s) = (phi.cos(), phi.sin());
+    crate::render::geometry::rot_from_rows([[0.0, s, c], [0.0, -c, s], [1.0, 0.0, 0.0]])
+}

@@ -65,10 +65,14 @@ class Settings:
         the ``quality`` preset's. Default (None): the preset's. The pixel's area is shared
         among the surfaces its samples see, each shaded once at the mean of its samples (a
         (0, m, 2)-net: one sample in each of the ``K`` rows and columns of the pixel, so an
-        edge's coverage is resolved to ``1/K`` of a pixel, and a sliver thinner than a pixel
-        is still seen); pixels that see one surface cost one shading as with ``1``. This is
-        what makes silhouettes, panel edges and thin parts area-correct
-        (docs/render-accuracy.md).
+        edge's coverage is resolved to ``1/K`` of a pixel); pixels that see one surface cost
+        one shading as with ``1``. With ``K > 1`` a pixel that a face narrower than a pixel
+        overlaps (a wire, a panel's rim) takes that face's visible area by exact clipping
+        instead (shaded on the CPU for every device), so thin parts are area-correct at any
+        angle to the pixel grid (docs/thin-parts.md; paid for only where there are such
+        parts). This is what makes silhouettes, panel edges and thin parts area-correct
+        (docs/render-accuracy.md). With ``1`` a part thinner than a pixel is seen where a
+        pixel centre falls on it.
     coverage : {"sampled", "analytic"}, optional
         ``"sampled"`` (default): the ``pixel_samples`` above. ``"analytic"``: one raster
         sample per pixel finds the triangles around it (those seen at the centres of the
@@ -77,11 +81,9 @@ class Settings:
         in depth order; each is shaded once at the centroid of its part. Edges then cost no
         more samples: coverage is exact to f32 rounding for the triangles found, wherever at
         most 32 triangles overlap a pixel (else, at a vertex shared by dozens of triangles,
-        the pixel falls back to its centre sample). Parts narrower than a pixel are found
-        only where a nearby pixel centre sees them: a thin wire or a plate's rim nearly
-        parallel to an image axis can fall between the centres and be partly missed (its
-        return too low by several percent); the sampled coverage does not have this limit.
-        Needs ``pixel_samples`` 1 (or unset).
+        the pixel falls back to its centre sample). Faces narrower than a pixel are listed
+        for the pixels they overlap (as with ``pixel_samples`` above), so a wire between the
+        pixel centres is not missed. Needs ``pixel_samples`` 1 (or unset).
     quality : {"fast", "balanced", "accurate", "reference"}, optional
         The speed/accuracy dial (:data:`QUALITY`; docs/tradeoff.md measures each):
         ``"fast"`` (coarse BRDF tables, pixels half the range FWHM across), ``"balanced"``

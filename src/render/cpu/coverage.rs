@@ -191,15 +191,22 @@ fn moments(p: &Poly) -> [f64; 3] {
 }
 
 /// The parts of pixel `(row, col)` under exact hidden-surface clipping (twin of
-/// `coverage_parts` in `shade.wgsl`): the candidates are the `seeds` and, breadth first, the
-/// faces across the edges ([`Mesh::adjacency`]) of every seed and of every candidate that
-/// overlaps the pixel (at most `MAX_QUEUE` examined; back faces skipped on closed meshes);
+/// `coverage_parts` in `shade.wgsl`): the candidates are the `seeds`, the `listed` faces
+/// (the pixel's thin faces, [`crate::render::thin::ThinPixels`]; those already seeds
+/// skipped) and, breadth first, the faces across the edges ([`Mesh::adjacency`]) of every
+/// seed and of every other candidate that overlaps the pixel, not of the listed ones (their
+/// neighbours are listed where thin, found from the seeds where not; at most `MAX_QUEUE`
+/// examined; back faces skipped on closed meshes);
 /// those overlapping the pixel (at most `MAX_CAND`) are clipped to it; a visible part is
 /// the clip minus every other candidate that overlaps it and is nearer at the centroid of
-/// their overlap (ties: the lower index), at most `MAX_PIECES` convex pieces kept. `None`
+/// their overlap (ties: the lower index), at most `MAX_PIECES` convex pieces kept; parts
+/// are made of the candidates from the first `n_parted` of the queue (seeds, then listed)
+/// only, the others still occluding them (`usize::MAX` as the kernel does; fewer for
+/// [`thin_parts`], which has no kernel counterpart). `None`
 /// when more than `MAX_QUEUE` triangles were to be examined or more than `MAX_CAND` overlap
 /// the pixel. `vertices`: the mesh's vertices at the attitude
 /// ([`rotate_vertices`](super::rotate_vertices)).
+#[allow(clippy::too_many_arguments)]
 pub fn coverage_parts(
     mesh: &Mesh,
     vertices: &[V3],
@@ -207,14 +214,27 @@ pub fn coverage_parts(
     row: usize,
     col: usize,
     seeds: &[usize],
+    listed: &[u32],
+    n_parted: usize,
 ) -> Option<Vec<Part>> {
     let x0 = -lay.ext + col as f64 * lay.pix;
     let y0 = lay.ext - row as f64 * lay.pix;
     let adj = mesh.adjacency();
     let mut queue: Vec<usize> = seeds.to_vec();
+    for &t in listed {
+        if !queue.contains(&(t as usize)) {
+            if queue.len() == MAX_QUEUE {
+                return None;
+            }
+            queue.push(t as usize);
+        }
+    }
+    let n_listed = queue.len();
     // (triangle, uv vertices, orientation, vertex depths)
     #[allow(clippy::type_complexity)]
     let mut tris: Vec<(usize, [[f64; 2]; 3], f64, [f64; 3])> = Vec::new();
+    // each candidate's place in the queue
+    let mut from_q: Vec<usize> = Vec::new();
     let mut qi = 0;
     while qi < queue.len() {
         let t = queue[qi];
@@ -233,8 +253,9 @@ pub fn coverage_parts(
         }
         if overlaps {
             tris.push((t, uv, den.signum(), [p[0][2], p[1][2], p[2][2]]));
+            from_q.push(qi);
         }
-        if overlaps || qi < seeds.len() {
+        if qi < seeds.len() || (overlaps && qi >= n_listed) {
             for &u in &adj[t] {
                 let u = u as usize;
                 if u < mesh.faces.len() && !queue.contains(&u) {
@@ -251,7 +272,10 @@ pub fn coverage_parts(
     // the centroid of the overlap (ties: the lower index), unless one of that one's edges
     // separates them
     let mut parts = Vec::new();
-    for &(t, uv, s, zt) in &tris {
+    for (&(t, uv, s, zt), &qi) in tris.iter().zip(&from_q) {
+        if qi >= n_parted {
+            continue;
+        }
         let base = clip_triangle(&unit_square(), &uv, s);
         let mut pieces = vec![base.clone()];
         for &(tj, uj, sj, zj) in &tris {
@@ -342,8 +366,9 @@ pub fn analytic_seeds(ids: &[u32], width: usize, row: usize, col: usize) -> (Vec
 /// A pixel's parts under analytic coverage from the centre id map `ids` (`width x width`):
 /// the seeds are the distinct triangles seen at the centres of its 3x3 neighbourhood (scan
 /// order); one triangle at all nine contains their hull and so is the whole pixel, shaded
-/// at its centre; else [`coverage_parts`], or the centre sample alone where that overflows
-/// (`vertices` as there).
+/// at its centre (unless the pixel has `thin` faces); else [`coverage_parts`] (with the
+/// `thin` faces listed), or the centre sample alone where that overflows (`vertices` as
+/// there).
 pub fn analytic_parts(
     mesh: &Mesh,
     vertices: &[V3],
@@ -351,9 +376,10 @@ pub fn analytic_parts(
     ids: &[u32],
     row: usize,
     col: usize,
+    thin: &[u32],
 ) -> Vec<Part> {
     let (cand, n_hit) = analytic_seeds(ids, lay.width, row, col);
-    if cand.len() == 1 && n_hit == 9 {
+    if cand.len() == 1 && n_hit == 9 && thin.is_empty() {
         return vec![Part {
             tri: cand[0],
             frac: 1.0,
@@ -361,7 +387,7 @@ pub fn analytic_parts(
             span: [1.0, 1.0],
         }];
     }
-    coverage_parts(mesh, vertices, lay, row, col, &cand).unwrap_or_else(|| {
+    coverage_parts(mesh, vertices, lay, row, col, &cand, thin, usize::MAX).unwrap_or_else(|| {
         // too many triangles: the centre sample, as with one sample per pixel
         match ids[row * lay.width + col] {
             0 => vec![],
@@ -373,4 +399,87 @@ pub fn analytic_parts(
             }],
         }
     })
+}
+
+/// Left of a thin-face pixel by its thin faces' parts, above which a pixel whose samples
+/// all see thin faces takes all its parts by exact clipping ([`thin_parts`]).
+pub const REST_EPS: f64 = 1e-3;
+
+/// The parts of a pixel with thin faces (`thin`, [`crate::render::thin::ThinPixels`]) and
+/// `K > 1` samples (`ids`, `offsets`, `surfaces` as [`sampled_parts`]; on the CPU for every
+/// backend, [`super::add_thin_pixels`]): the thin faces' visible parts by exact clipping
+/// ([`coverage_parts`] with the thin faces listed first and making parts, the other
+/// triangles its samples see occluding them), and the rest of the pixel, 1 minus their
+/// area, shared among the surfaces that the samples seeing no thin face see, grouped as in
+/// [`sampled_parts`], in proportion to those samples and the empty ones. Where every sample
+/// sees a thin face and more than `REST_EPS` (1e-3) is left, all its parts by exact clipping
+/// (the samples' triangles as seeds, the thin faces listed). `None` where the clipping
+/// overflows (the caller then takes [`sampled_parts`]).
+#[allow(clippy::too_many_arguments)]
+pub fn thin_parts(
+    mesh: &Mesh,
+    vertices: &[V3],
+    lay: &Layout,
+    ids: &[Vec<u32>],
+    offsets: &[[f64; 2]],
+    surfaces: &[u32],
+    pixel: usize,
+    thin: &[u32],
+) -> Option<Vec<Part>> {
+    let (row, col) = (pixel / lay.width, pixel % lay.width);
+    let mut listed: Vec<u32> = thin.to_vec();
+    let mut thin_samples = 0usize;
+    for s_ids in ids {
+        let id = s_ids[pixel];
+        if id == 0 {
+            continue;
+        }
+        match listed.iter().position(|&t| t == id - 1) {
+            Some(j) if j < thin.len() => thin_samples += 1,
+            Some(_) => {}
+            None => {
+                if listed.len() == MAX_QUEUE {
+                    return None;
+                }
+                listed.push(id - 1);
+            }
+        }
+    }
+    let mut parts = coverage_parts(mesh, vertices, lay, row, col, &[], &listed, thin.len())?;
+    let area: f64 = parts.iter().map(|p| p.frac).sum();
+    let rest = (1.0 - area).max(0.0);
+    let n_other = ids.len() - thin_samples;
+    if n_other == 0 {
+        if rest <= REST_EPS {
+            return Some(parts);
+        }
+        // every sample on a thin face: the whole pixel by exact clipping
+        let mut seeds: Vec<usize> = Vec::with_capacity(ids.len());
+        for s_ids in ids {
+            let t = s_ids[pixel] as usize - 1;
+            if !seeds.contains(&t) {
+                seeds.push(t);
+            }
+        }
+        return coverage_parts(mesh, vertices, lay, row, col, &seeds, thin, usize::MAX);
+    }
+    // the other samples, grouped by surface (sampled_parts_into), each sample covering
+    // `rest / n_other` of the pixel
+    let keep: Vec<Vec<u32>> = ids
+        .iter()
+        .map(|s_ids| {
+            let id = s_ids[pixel];
+            let on_thin = id != 0 && thin.contains(&(id - 1));
+            vec![if on_thin { 0 } else { id }]
+        })
+        .collect();
+    let mut groups = Vec::new();
+    sampled_parts_into(&keep, offsets, surfaces, 0, &mut groups);
+    let n_s = ids.len() as f64;
+    for mut g in groups {
+        // sampled_parts_into gives count / K
+        g.frac *= n_s * rest / n_other as f64;
+        parts.push(g);
+    }
+    Some(parts)
 }

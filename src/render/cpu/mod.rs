@@ -31,7 +31,8 @@ mod shade;
 mod shadow;
 
 pub use coverage::{
-    analytic_parts, analytic_seeds, coverage_parts, sampled_parts, sampled_parts_into, Part,
+    analytic_parts, analytic_seeds, coverage_parts, sampled_parts, sampled_parts_into, thin_parts,
+    Part,
 };
 pub use raster::{
     project, project_rotated, rasterize, rotate_vertices, visibility, visibility_at, Projected,
@@ -42,6 +43,7 @@ pub use shadow::{shadowed, TransmitterView};
 
 use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
 use super::geometry::{Mesh, Rot};
+use super::thin::{face_thinness, ThinPixels};
 use crate::brdf::table::BrdfTable;
 use crate::optics::frames::{Frame, V3};
 use accumulate::{Accumulator, PixelAcc};
@@ -159,6 +161,10 @@ pub fn attitudes_at_once(bytes: usize, threads: usize) -> usize {
 /// Rows of an attitude's image per block of [`render_cpu`]'s work.
 const ROWS_PER_BLOCK: usize = 8;
 
+/// One attitude's rotated vertices, visibility samples' id maps, transmitter's view
+/// (bistatic) and pixels with thin faces.
+type Prepared = (Vec<V3>, Vec<Vec<u32>>, Option<TransmitterView>, ThinPixels);
+
 /// The whole renderer on the CPU in f64 (twin of `gpu::render`, without supersampling
 /// of the image outputs: `sensor.supersampling` must be 1).
 pub fn render_cpu(
@@ -182,6 +188,121 @@ pub fn render_cpu_with_progress(
     brdf: &(impl Brdf + ?Sized),
     progress: Progress,
 ) -> crate::Result<Rendered> {
+    render_pixels(mesh, sensor, rotations, outputs, brdf, progress, false)
+}
+
+/// The pixels with thin faces alone ([`ThinPixels`], `K > 1` samples), as [`render_cpu`]
+/// renders them; every other pixel is left empty. `gpu::render` leaves exactly these
+/// empty, and [`add_thin_pixels`] adds them to its result.
+pub fn render_thin_pixels(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &(impl Brdf + ?Sized),
+) -> Rendered {
+    render_pixels(mesh, sensor, rotations, outputs, brdf, None, true)
+        .expect("without a progress callback nothing cancels")
+}
+
+/// The pixels with thin faces of a `K > 1` render by `gpu::render` (which leaves them
+/// empty: the same clipping in a kernel of its own was many times slower on lavapipe than
+/// this f64 code), shaded on the CPU by
+/// [`render_thin_pixels`] with `brdf` (the f64 originals of the device's tables,
+/// [`Tables`]) and added to `r`: their images (summed into the sensor's pixels with
+/// supersampling), ranges and coverage (merged with the device's covered sub-pixels by
+/// coverage weights), profiles and totals. Nothing to do with one sample per pixel or
+/// analytic coverage (the kernel takes them itself).
+pub fn add_thin_pixels(
+    r: &mut Rendered,
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &(impl Brdf + ?Sized),
+) {
+    if sensor.samples <= 1 || sensor.analytic {
+        return;
+    }
+    let ss = sensor.supersampling;
+    let mut inner = sensor.clone();
+    inner.resolution *= ss;
+    inner.supersampling = 1;
+    let (res, w, ch) = (sensor.resolution, inner.resolution, r.channels);
+    let n_prof = r.n_bins * ch;
+    // in chunks of attitudes, so that the thin pass holds at most that many attitudes'
+    // images beside the device's result
+    for (ci, rots) in rotations.chunks(THIN_CHUNK).enumerate() {
+        let first = ci * THIN_CHUNK;
+        let t = render_thin_pixels(mesh, &inner, rots, outputs, brdf);
+        for (a, b) in r.total[first * ch..].iter_mut().zip(&t.total) {
+            *a += b;
+        }
+        if let (Some(p), Some(tp)) = (r.profile.as_mut(), t.profile.as_ref()) {
+            for (a, b) in p[first * n_prof..].iter_mut().zip(tp) {
+                *a += b;
+            }
+        }
+        // output pixel of the chunk's attitude l's sub-pixel q
+        let out_of =
+            |l: usize, q: usize| (first + l) * res * res + (q / w / ss) * res + (q % w) / ss;
+        if let (Some(im), Some(ti)) = (r.image.as_mut(), t.image.as_ref()) {
+            for (k, v) in ti.chunks(ch).enumerate() {
+                // (only where the thin pass has a value: the device's other pixels keep
+                // their bits)
+                if v.iter().any(|&x| x != 0.0) {
+                    let o = out_of(k / (w * w), k % (w * w));
+                    for (a, b) in im[o * ch..(o + 1) * ch].iter_mut().zip(v) {
+                        *a += b;
+                    }
+                }
+            }
+        }
+        if let (Some(rg), Some(cv), Some(tr), Some(tc)) = (
+            r.range.as_mut(),
+            r.coverage.as_mut(),
+            t.range.as_ref(),
+            t.coverage.as_ref(),
+        ) {
+            // per output pixel: the device's covered fraction and range sum, then the thin
+            // sub-pixels' (both as sub-pixel areas: the device's coverage is the mean over
+            // its ss^2 sub-pixels, with none from the thin ones)
+            let n_sub = (ss * ss) as f64;
+            let mut sums: std::collections::BTreeMap<usize, (f64, f64)> = Default::default();
+            for (k, (&f, &rr)) in tc.iter().zip(tr).enumerate() {
+                if f > 0.0 && !rr.is_nan() {
+                    let e = sums.entry(out_of(k / (w * w), k % (w * w))).or_default();
+                    e.0 += f as f64;
+                    e.1 += f as f64 * rr as f64;
+                }
+            }
+            for (o, (f, s)) in sums {
+                let f_dev = cv[o] as f64 * n_sub;
+                let s_dev = if f_dev > 0.0 {
+                    rg[o] as f64 * f_dev
+                } else {
+                    0.0
+                };
+                rg[o] = ((s_dev + s) / (f_dev + f)) as f32;
+                cv[o] = ((f_dev + f) / n_sub) as f32;
+            }
+        }
+    }
+}
+
+/// Attitudes per pass of [`add_thin_pixels`].
+const THIN_CHUNK: usize = 64;
+
+#[allow(clippy::too_many_arguments)]
+fn render_pixels(
+    mesh: &Mesh,
+    sensor: &SensorSetup,
+    rotations: &[Rot],
+    outputs: Outputs,
+    brdf: &(impl Brdf + ?Sized),
+    progress: Progress,
+    thin_only: bool,
+) -> crate::Result<Rendered> {
     let lay = Layout::new(mesh, sensor);
     let w = lay.width;
     let ch = sensor.channels();
@@ -192,10 +313,21 @@ pub fn render_cpu_with_progress(
     let offsets = super::samples::sample_offsets(sensor.samples);
     let beta = sensor.bistatic_angle;
     let beam = Beam::new(sensor, &lay);
+    // thin parts take exact coverage with K > 1 samples and with analytic coverage
+    let thinness = (sensor.samples > 1 || sensor.analytic).then(|| face_thinness(mesh));
     // per attitude: the rotated vertices, the visibility samples' id maps (in parallel
-    // when the attitudes are not) and the transmitter's view (bistatic)
+    // when the attitudes are not), the transmitter's view (bistatic) and the pixels with
+    // thin faces
     let prepare = |rot: &Rot, in_parallel: bool| {
         let vertices = rotate_vertices(mesh, rot);
+        let thin = thinness
+            .as_deref()
+            .map(|a| ThinPixels::new(mesh, a, rot, &vertices, &lay))
+            .unwrap_or_default();
+        if thin_only && thin.is_empty() {
+            // nothing to shade: no raster
+            return (vertices, vec![], None, thin);
+        }
         let tris = project_rotated(mesh, &vertices);
         let ids: Vec<Vec<u32>> = if in_parallel {
             offsets
@@ -209,23 +341,41 @@ pub fn render_cpu_with_progress(
                 .collect()
         };
         let tx = (beta > 0.0).then(|| TransmitterView::new(mesh, rot, beta));
-        (vertices, ids, tx)
+        (vertices, ids, tx, thin)
     };
     // shade the pixels of rows `rows` of an attitude
-    let shade_rows = |rot: &Rot,
-                      (vertices, ids, tx): &(Vec<V3>, Vec<Vec<u32>>, Option<TransmitterView>),
-                      rows: &Range<usize>| {
+    let shade_rows = |rot: &Rot, (vertices, ids, tx, thin): &Prepared, rows: &Range<usize>| {
         let mut acc = Accumulator::new(sensor, &lay, outputs, rows.start * w..rows.end * w);
         let mut parts: Vec<Part> = Vec::with_capacity(sensor.samples);
         for k in rows.start * w..rows.end * w {
             // a pixel none of whose samples sees the mesh adds nothing (analytic coverage
-            // also looks at the neighbours' centres)
-            if !sensor.analytic && ids.iter().all(|s_ids| s_ids[k] == 0) {
+            // also looks at the neighbours' centres), unless a thin face overlaps it
+            let thin_faces = thin.faces_at(k);
+            if thin_only && thin_faces.is_empty() {
+                continue;
+            }
+            if !sensor.analytic && thin_faces.is_empty() && ids.iter().all(|s_ids| s_ids[k] == 0) {
                 continue;
             }
             let (row, col) = (k / w, k % w);
             if sensor.analytic {
-                parts = analytic_parts(mesh, vertices, &lay, &ids[0], row, col);
+                parts = analytic_parts(mesh, vertices, &lay, &ids[0], row, col, thin_faces);
+            } else if let Some(p) = (!thin_faces.is_empty())
+                .then(|| {
+                    thin_parts(
+                        mesh,
+                        vertices,
+                        &lay,
+                        ids,
+                        &offsets,
+                        mesh.surfaces(),
+                        k,
+                        thin_faces,
+                    )
+                })
+                .flatten()
+            {
+                parts = p;
             } else {
                 sampled_parts_into(ids, &offsets, mesh.surfaces(), k, &mut parts);
             }

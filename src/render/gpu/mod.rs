@@ -52,6 +52,7 @@ pub use readback::host_profile;
 
 use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
 use super::geometry::{Mesh, Rot};
+use super::thin::{self, face_thinness};
 use crate::error::Result;
 use passes::{encode_chunk, shade_key, ChunkBindings, SceneBuffers};
 use plan::Plan;
@@ -71,7 +72,10 @@ pub fn check_batch(rotations: &[Rot]) -> Result<()> {
     Ok(())
 }
 
-/// Render a batch of attitudes (rotations) of `mesh` with the packed tables.
+/// Render a batch of attitudes (rotations) of `mesh` with the packed tables. With `K > 1`
+/// samples (not analytic coverage) the pixels with thin faces ([`thin::ThinPixels`]) are
+/// left empty: [`crate::render::cpu::add_thin_pixels`] shades them on the CPU and adds
+/// them (as [`crate::render::request::render`] does).
 pub fn render(
     gpu: &Gpu,
     mesh: &Mesh,
@@ -100,7 +104,7 @@ pub fn render_with_progress(
     let lay = Layout::new(mesh, sensor);
     lay.check_bins(sensor)?;
     plan::check_image(gpu, &lay, sensor, mesh.faces.len())?;
-    let geometry = pack::geometry(mesh, sensor.analytic);
+    let geometry = pack::geometry(mesh, sensor.analytic || sensor.samples > 1);
     let plan = Plan::new(
         gpu,
         &lay,
@@ -162,13 +166,24 @@ fn render_chunks(
     );
     let transmitter = key.shadows.then_some(sensor.bistatic_angle);
     let mut host = HostOutputs::new(outputs, n, sensor.resolution, plan.channels, lay.n_bins);
+    // thin parts take exact coverage with K > 1 samples and with analytic coverage
+    let thinness = (sensor.samples > 1 || sensor.analytic).then(|| face_thinness(mesh));
     let setup = t0.elapsed().as_secs_f64();
     let (mut encoding, mut waiting, mut reading) = (0.0, 0.0, 0.0);
     for start in (0..n).step_by(c) {
         let m = (n - start).min(c);
         let rots = &rotations[start..start + m];
         let t = Instant::now();
-        let bindings = ChunkBindings::new(gpu, &scene, &targets, &results, rots, transmitter);
+        let thin_words = thin_words(mesh, thinness.as_deref(), rots, lay, gpu)?;
+        let bindings = ChunkBindings::new(
+            gpu,
+            &scene,
+            &targets,
+            &results,
+            rots,
+            transmitter,
+            &thin_words,
+        );
         let mut enc = dev.create_command_encoder(&Default::default());
         results.clear(&mut enc);
         encode_chunk(
@@ -206,4 +221,41 @@ fn render_chunks(
         ("readback", reading),
     ];
     Ok(r)
+}
+
+/// The shade kernel's thin-pixel words of a chunk ([`thin::gpu_words`], found on the CPU
+/// for each attitude in parallel; empty without `thinness` or without thin pixels).
+fn thin_words(
+    mesh: &Mesh,
+    thinness: Option<&[[f64; 4]]>,
+    rots: &[Rot],
+    lay: &Layout,
+    gpu: &Gpu,
+) -> Result<Vec<u32>> {
+    use rayon::prelude::*;
+    let Some(a) = thinness else {
+        return Ok(Vec::new());
+    };
+    let per: Vec<thin::ThinPixels> = rots
+        .par_iter()
+        .map(|r| {
+            let vertices = crate::render::cpu::rotate_vertices(mesh, r);
+            thin::ThinPixels::new(mesh, a, r, &vertices, lay)
+        })
+        .collect();
+    let words = thin::gpu_words(&per, lay.width * lay.width);
+    let max = gpu.limits.max_storage_buffer_binding_size;
+    if 4 * words.len() as u64 > max {
+        return Err(crate::Error::param(
+            "resolution",
+            lay.width,
+            format!(
+                "an image whose thin-part lists ({} bytes for {} attitudes) fit the device's \
+                 {max}-byte storage binding",
+                4 * words.len(),
+                rots.len()
+            ),
+        ));
+    }
+    Ok(words)
 }

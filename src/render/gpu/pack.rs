@@ -13,11 +13,12 @@ use crate::render::samples::{
 };
 
 /// The mesh as the kernels read it ([`Mesh::gpu_geometry`]: vertices, then normals), with
-/// analytic coverage followed by the triangles across each edge, for the kernel's
-/// candidate search (`u32::MAX` across a boundary edge).
-pub fn geometry(mesh: &Mesh, analytic: bool) -> Vec<[f32; 4]> {
+/// `adjacency` (analytic coverage, or K > 1 samples for the thin-part pixels) followed by
+/// the triangles across each edge, for the kernel's candidate search (`u32::MAX` across a
+/// boundary edge).
+pub fn geometry(mesh: &Mesh, adjacency: bool) -> Vec<[f32; 4]> {
     let mut geometry = mesh.gpu_geometry();
-    if analytic {
+    if adjacency {
         // the triangles across each edge, for the kernel's candidate search (after the
         // vertices and normals; u32::MAX across a boundary edge)
         geometry.extend(

@@ -158,7 +158,8 @@ pub(super) struct ChunkBindings {
 
 impl ChunkBindings {
     /// For the attitudes `rots`; `beta`: the bistatic angle when the transmitter's view
-    /// is drawn (the shade kernel's cast shadows), else `None`.
+    /// is drawn (the shade kernel's cast shadows), else `None`; `thin`: the chunk's pixels
+    /// with thin faces ([`crate::render::thin::gpu_words`]; empty: none).
     pub(super) fn new(
         gpu: &Gpu,
         scene: &SceneBuffers,
@@ -166,6 +167,7 @@ impl ChunkBindings {
         results: &ResultBuffers<'_>,
         rots: &[Rot],
         beta: Option<f64>,
+        thin: &[u32],
     ) -> Self {
         let dev = &gpu.device;
         let rot_words: Vec<[f32; 12]> = rots.iter().map(gpu_rotation).collect();
@@ -225,6 +227,13 @@ impl ChunkBindings {
             vis_group(&buf, &scene.vis_image)
         });
         let pl = &gpu.pipelines;
+        let thin_buf = (!thin.is_empty()).then(|| {
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("thin pixels"),
+                contents: bytemuck::cast_slice(thin),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        });
         let shade_bg = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shade"),
             layout: &pl.shade_layout,
@@ -284,6 +293,13 @@ impl ChunkBindings {
                     binding: 10,
                     resource: targets
                         .ids_buf
+                        .as_ref()
+                        .unwrap_or(&pl.dummy_buffer)
+                        .as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 11,
+                    resource: thin_buf
                         .as_ref()
                         .unwrap_or(&pl.dummy_buffer)
                         .as_entire_binding(),

@@ -277,6 +277,8 @@ impl Pipelines {
                 ),
                 // the receiver's ids with K >= 4 samples (gather.wgsl)
                 storage(10, true, cs),
+                // the pixels with thin faces (render::thin)
+                storage(11, true, cs),
             ],
         });
         let shade_pipeline_layout =

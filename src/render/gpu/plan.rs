@@ -156,7 +156,8 @@ impl Plan {
             } else {
                 0
             },
-            // triangle indices (K >= 4: gathered tiles with their margins)
+            // triangle indices (K >= 4: gathered tiles with their margins); these also
+            // bound the thin-pixel index (4 bytes a pixel; its lists are checked when made)
             ((w + margin) * (w + margin) * 4 * sensor.samples) as u64,
         ];
         let biggest = per_att.iter().copied().max().unwrap_or(1).max(1);

@@ -1,0 +1,453 @@
+//! Thin parts: surfaces narrower than about a pixel in projection, whose coverage the
+//! fixed per-pixel sample pattern aliases (a wire along the image rows is hit by the same
+//! samples in every pixel along it, so its coverage error does not average out, and a wire
+//! between two rows of samples is not seen at all). Per attitude the CPU finds the thin
+//! faces ([`is_thin`]) turned toward the receiver and lists, per pixel, those that overlap
+//! it ([`ThinPixels`], exact: each face clipped to each row of pixels).
+//! - With `K > 1` samples such a pixel takes its thin faces' visible parts by exact
+//!   polygon clipping, occluded by each other and by the triangles its samples see, and
+//!   shares the rest of its area among the surfaces its other samples see
+//!   ([`crate::render::cpu::thin_parts`]). It is shaded on the CPU in f64 for every
+//!   backend: the device leaves it empty (`shaders/shade.wgsl`, binding 11) and
+//!   [`crate::render::cpu::add_thin_pixels`] adds it, as the same clipping in a kernel of
+//!   its own was many times slower on lavapipe.
+//! - With analytic coverage the listed faces join the candidates of the kernel's exact
+//!   clipping (`coverage_parts` in `shaders/shared/coverage.wgsl`, twin
+//!   [`crate::render::cpu::coverage_parts`]).
+//! - Where the clipping overflows its capacities, the pixel's samples (or centre) as
+//!   before. One sample per pixel (`"fast"`) is left as it is.
+//!
+//! Which faces are thin is decided per face and attitude from a vector computed once per
+//! mesh ([`face_thinness`]), `(a_x, a_y, a_z, s)` in the body frame (m):
+//! - without vertex normals (flat shading), `a = w n`, `n` the face's unit normal and `w`
+//!   the width of its flat surface ([`crate::render::geometry::Mesh::surfaces`]) in its
+//!   plane (the least distance between two parallel lines that hold the surface's convex
+//!   hull between them), `s = 0`: a planar region of width `w` whose normal is `R n` in the
+//!   telescope frame projects to a region of width at least `w |(R n)_z|`;
+//! - with vertex normals (smooth shading, each face its own surface), `a = 0` and `s` the
+//!   smallest extent of the face's smooth part (the faces joined to it through edges with
+//!   its material) along the principal axes of its vertices (a wire's diameter, a
+//!   plate's thickness), whatever the attitude.
+//!
+//! A face is thin at attitude `R` when `|(R a)_z| + s < THIN_PX delta` ([`is_thin`]):
+//! whatever its own size, a triangle of a wide panel seen face-on is not thin, and every
+//! triangle of the panel is when it is seen nearly edge-on. Limits: the width is that of
+//! the convex hull, so a narrow surface bent around a wide hull (a ring, an L) is not
+//! found thin; smooth parts are judged by their principal extents.
+
+use crate::optics::frames::V3;
+use crate::render::api::Layout;
+use crate::render::geometry::{Mesh, Rot};
+
+/// Width (pixels) under which a part is thin: its pixels take its area exactly.
+pub const THIN_PX: f64 = 1.0;
+
+/// A face that is never thin (degenerate surfaces).
+const NEVER: [f64; 4] = [0.0, 0.0, 0.0, 1e30];
+
+/// Per face, `(a_x, a_y, a_z, s)` of the module's test (body frame, m).
+pub fn face_thinness(mesh: &Mesh) -> Vec<[f64; 4]> {
+    let n_f = mesh.faces.len();
+    let corners = |t: usize| mesh.faces[t].map(|k| V3::from(mesh.vertices[k as usize]));
+    let normal = |t: usize| -> Option<V3> {
+        let p = corners(t);
+        let c = (p[1] - p[0]).cross(p[2] - p[0]);
+        let l = c.length();
+        (l > 0.0 && l.is_finite()).then(|| c / l)
+    };
+    let mut out = vec![NEVER; n_f];
+    if mesh.normals.is_none() {
+        // flat surfaces: the width of each surface's hull in its plane
+        let surf = mesh.surfaces();
+        let mut members: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
+        for (t, &s) in surf.iter().enumerate() {
+            members.entry(s).or_default().push(t);
+        }
+        for (&root, faces) in &members {
+            let Some(n) = normal(root as usize) else {
+                continue;
+            };
+            let e1 = any_perp(n);
+            let e2 = n.cross(e1);
+            let pts: Vec<[f64; 2]> = faces
+                .iter()
+                .flat_map(|&t| corners(t))
+                .map(|p| [p.dot(e1), p.dot(e2)])
+                .collect();
+            let w = hull_width(pts);
+            for &t in faces {
+                if let Some(nt) = normal(t) {
+                    out[t] = [w * nt.x, w * nt.y, w * nt.z, 0.0];
+                }
+            }
+        }
+        return out;
+    }
+    // smooth parts: the faces joined through edges with the same material
+    let adj = mesh.adjacency();
+    let mut seen = vec![false; n_f];
+    for root in 0..n_f {
+        if seen[root] {
+            continue;
+        }
+        seen[root] = true;
+        let mut part = vec![root];
+        let mut i = 0;
+        while i < part.len() {
+            let t = part[i];
+            for &u in &adj[t] {
+                let u = u as usize;
+                if u < n_f && !seen[u] && mesh.face_material[u] == mesh.face_material[root] {
+                    seen[u] = true;
+                    part.push(u);
+                }
+            }
+            i += 1;
+        }
+        let pts: Vec<V3> = part.iter().flat_map(|&t| corners(t)).collect();
+        let s = principal_extent(&pts);
+        for &t in &part {
+            out[t] = [0.0, 0.0, 0.0, s];
+        }
+    }
+    out
+}
+
+/// Whether a face of thinness `a` ([`face_thinness`]) is thin at attitude `rot` with
+/// pixels of side `pix` (m): `|(R a)_z| + s < THIN_PX pix`.
+pub fn is_thin(a: &[f64; 4], rot: &Rot, pix: f64) -> bool {
+    let z = rot.row(2).dot(glam::DVec3::new(a[0], a[1], a[2]));
+    z.abs() + a[3] < THIN_PX * pix
+}
+
+/// Per pixel of one attitude's image, the thin faces turned toward the receiver (all
+/// faces on open meshes) whose projection overlaps the pixel.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ThinPixels {
+    /// The pixels with thin faces (`row * width + col`), ascending.
+    pixels: Vec<u32>,
+    /// Pixel `pixels[i]`'s faces are `faces[starts[i]..starts[i + 1]]` (ascending).
+    starts: Vec<u32>,
+    faces: Vec<u32>,
+}
+
+impl ThinPixels {
+    /// The thin faces of `mesh` at attitude `rot` (its rotated vertices `vertices`,
+    /// [`crate::render::cpu::rotate_vertices`]; `thinness` from [`face_thinness`]) and the
+    /// pixels of `lay`'s image each overlaps: each face clipped to each row of pixels it
+    /// spans, the columns from the clipped polygon's extent (exact for a convex polygon
+    /// within a row; pixels it only touches are listed too, and the clipping that uses the
+    /// list drops their zero area).
+    pub fn new(
+        mesh: &Mesh,
+        thinness: &[[f64; 4]],
+        rot: &Rot,
+        vertices: &[V3],
+        lay: &Layout,
+    ) -> Self {
+        let w = lay.width;
+        let mut pairs = Vec::new();
+        for (t, a) in thinness.iter().enumerate() {
+            if !is_thin(a, rot, lay.pix) {
+                continue;
+            }
+            let uv = mesh.faces[t].map(|k| {
+                let p = vertices[k as usize];
+                [(p[0] + lay.ext) / lay.pix, (lay.ext - p[1]) / lay.pix]
+            });
+            let den = (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
+                - (uv[1][1] - uv[0][1]) * (uv[2][0] - uv[0][0]);
+            // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
+            if !den.is_finite() || den == 0.0 || (mesh.closed && den > 0.0) {
+                continue;
+            }
+            let (v_lo, v_hi) = uv
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    (lo.min(p[1]), hi.max(p[1]))
+                });
+            let rows = (v_lo.floor().max(0.0) as usize)..(v_hi.ceil().min(w as f64) as usize);
+            for row in rows {
+                let strip = clip_rows(&uv, row as f64);
+                if strip.len() < 3 {
+                    continue;
+                }
+                let (u_lo, u_hi) = strip
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                        (lo.min(p[0]), hi.max(p[0]))
+                    });
+                let lo = u_lo.floor().max(0.0) as usize;
+                let hi = (u_hi.floor() + 1.0).min(w as f64) as usize;
+                for col in lo..hi {
+                    pairs.push(((row * w + col) as u32, t as u32));
+                }
+            }
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut out = ThinPixels {
+            starts: vec![0],
+            ..Default::default()
+        };
+        for (k, t) in pairs {
+            if out.pixels.last() != Some(&k) {
+                if !out.pixels.is_empty() {
+                    out.starts.push(out.faces.len() as u32);
+                }
+                out.pixels.push(k);
+            }
+            out.faces.push(t);
+        }
+        if !out.pixels.is_empty() {
+            out.starts.push(out.faces.len() as u32);
+        }
+        out
+    }
+
+    /// Whether no pixel has a thin face.
+    pub fn is_empty(&self) -> bool {
+        self.pixels.is_empty()
+    }
+
+    /// How many pixels have thin faces.
+    pub fn len(&self) -> usize {
+        self.pixels.len()
+    }
+
+    /// The thin faces overlapping pixel `pixel` (ascending; most pixels have none).
+    pub fn faces_at(&self, pixel: usize) -> &[u32] {
+        match self.pixels.binary_search(&(pixel as u32)) {
+            Ok(i) => &self.faces[self.starts[i] as usize..self.starts[i + 1] as usize],
+            Err(_) => &[],
+        }
+    }
+
+    /// The pixels with thin faces, each with its faces.
+    pub fn iter(&self) -> impl Iterator<Item = (usize, &[u32])> + '_ {
+        self.pixels.iter().enumerate().map(|(i, &k)| {
+            (
+                k as usize,
+                &self.faces[self.starts[i] as usize..self.starts[i + 1] as usize],
+            )
+        })
+    }
+}
+
+/// Whether each pixel of an image `width` pixels across (the renderer's framing, `[-ext,
+/// ext]` with `ext` the mesh's radius) has a thin face at attitude `rot` ([`ThinPixels`];
+/// `thinness` from [`face_thinness`]), row-major.
+pub fn thin_pixel_mask(mesh: &Mesh, thinness: &[[f64; 4]], rot: &Rot, width: usize) -> Vec<bool> {
+    let ext = mesh.radius;
+    let lay = Layout {
+        ext,
+        width,
+        pix: 2.0 * ext / width as f64,
+        r_min: 0.0,
+        n_bins: 0,
+        max_extent: 0.0,
+        support: 0.0,
+    };
+    let vertices: Vec<V3> = mesh
+        .vertices
+        .iter()
+        .map(|&v| crate::render::geometry::rotate(rot, V3::from(v)))
+        .collect();
+    let thin = ThinPixels::new(mesh, thinness, rot, &vertices, &lay);
+    let mut mask = vec![false; width * width];
+    for (k, _) in thin.iter() {
+        mask[k] = true;
+    }
+    mask
+}
+
+/// The shade kernel's words for a chunk of attitudes' [`ThinPixels`] (binding 11 of
+/// `shaders/shade.wgsl`, `n_pix` pixels per attitude): the number of pixels with thin
+/// faces, then per attitude and pixel 0 or the position `p` of its faces (`words[p]` of
+/// them, then their indices), then those lists. Empty when no pixel has a thin face (the
+/// kernel then reads a placeholder of zeros).
+pub fn gpu_words(chunk: &[ThinPixels], n_pix: usize) -> Vec<u32> {
+    if chunk.iter().all(|t| t.is_empty()) {
+        return Vec::new();
+    }
+    let mut words = vec![0u32; 1 + chunk.len() * n_pix];
+    for (l, t) in chunk.iter().enumerate() {
+        words[0] += t.len() as u32;
+        for (k, faces) in t.iter() {
+            words[1 + l * n_pix + k] = words.len() as u32;
+            words.push(faces.len() as u32);
+            words.extend_from_slice(faces);
+        }
+    }
+    words
+}
+
+/// The part of triangle `uv` (pixel coordinates) between `v = row` and `v = row + 1`.
+fn clip_rows(uv: &[[f64; 2]; 3], row: f64) -> Vec<[f64; 2]> {
+    let clip = |p: Vec<[f64; 2]>, f: &dyn Fn([f64; 2]) -> f64| -> Vec<[f64; 2]> {
+        let mut out = Vec::with_capacity(p.len() + 2);
+        for k in 0..p.len() {
+            let (a, b) = (p[k], p[(k + 1) % p.len()]);
+            let (fa, fb) = (f(a), f(b));
+            if fa >= 0.0 {
+                out.push(a);
+            }
+            if (fa >= 0.0) != (fb >= 0.0) {
+                let t = fa / (fa - fb);
+                out.push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
+            }
+        }
+        out
+    };
+    let p = clip(uv.to_vec(), &|p| p[1] - row);
+    clip(p, &|p| row + 1.0 - p[1])
+}
+
+/// Any unit vector normal to the unit vector `n`.
+fn any_perp(n: V3) -> V3 {
+    let t = if n.x.abs() < 0.9 {
+        V3::new(1.0, 0.0, 0.0)
+    } else {
+        V3::new(0.0, 1.0, 0.0)
+    };
+    let p = n.cross(t);
+    p / p.length()
+}
+
+/// The width of the convex hull of `pts`: over the hull's edges, the least of the largest
+/// distances of a hull vertex from the edge's line (0 for fewer than three points or
+/// collinear ones).
+fn hull_width(mut pts: Vec<[f64; 2]>) -> f64 {
+    pts.sort_by(|a, b| a.partial_cmp(b).expect("finite vertices"));
+    pts.dedup();
+    if pts.len() < 3 {
+        return 0.0;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    // Andrew's monotone chain
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * pts.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let it: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
+        for &p in it {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    if hull.len() < 3 {
+        return 0.0;
+    }
+    let mut w = f64::INFINITY;
+    for k in 0..hull.len() {
+        let (a, b) = (hull[k], hull[(k + 1) % hull.len()]);
+        let l = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+        if l == 0.0 {
+            continue;
+        }
+        let far = hull
+            .iter()
+            .map(|&p| cross(a, b, p).abs() / l)
+            .fold(0.0, f64::max);
+        w = w.min(far);
+    }
+    w
+}
+
+/// The smallest extent of `pts` along the principal axes of their covariance.
+fn principal_extent(pts: &[V3]) -> f64 {
+    let n = pts.len() as f64;
+    let mean = pts.iter().fold(V3::ZERO, |s, &p| s + p) / n;
+    let mut c = nalgebra::Matrix3::<f64>::zeros();
+    for p in pts {
+        let d = *p - mean;
+        let d = nalgebra::Vector3::new(d.x, d.y, d.z);
+        c += d * d.transpose();
+    }
+    let eig = nalgebra::SymmetricEigen::new(c);
+    (0..3)
+        .map(|i| {
+            let u = eig.eigenvectors.column(i);
+            let u = V3::new(u[0], u[1], u[2]);
+            let (lo, hi) = pts
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    let x = p.dot(u);
+                    (lo.min(x), hi.max(x))
+                });
+            hi - lo
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The hull width of a rectangle is its short side, at any rotation in the plane.
+    #[test]
+    fn hull_width_of_a_rectangle() {
+        for t in [0.0f64, 0.3, 1.0] {
+            let (c, s) = (t.cos(), t.sin());
+            let r = |x: f64, y: f64| [c * x - s * y, s * x + c * y];
+            let pts = vec![
+                r(0.0, 0.0),
+                r(3.0, 0.0),
+                r(3.0, 0.5),
+                r(0.0, 0.5),
+                r(1.0, 0.2),
+            ];
+            assert!((hull_width(pts) - 0.5).abs() < 1e-12);
+        }
+        assert_eq!(hull_width(vec![[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]), 0.0);
+    }
+
+    /// A thin plate (flat shaded): its rims are thin at any attitude, its faces only
+    /// nearly edge-on; the same plate with vertex normals is one smooth part as thin as
+    /// its thickness.
+    #[test]
+    fn plate_rims_and_faces() {
+        let (h, t) = (0.5, 0.002);
+        let mut v = vec![];
+        for z in [-t / 2.0, t / 2.0] {
+            v.extend([[-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z]]);
+        }
+        let f: Vec<[u32; 3]> = vec![
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 2, 1],
+            [0, 3, 2],
+            [0, 1, 5],
+            [0, 5, 4],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        let mesh = Mesh::new(v.clone(), f.clone(), None, vec![0; 12], 1).unwrap();
+        let a = face_thinness(&mesh);
+        assert!((a[0][2].abs() - 2.0 * h).abs() < 1e-12 && a[0][3] == 0.0);
+        assert!((a[4][1].abs() - t).abs() < 1e-12);
+        let pix = 0.004;
+        let face_on = Rot::IDENTITY;
+        assert!(!is_thin(&a[0], &face_on, pix) && is_thin(&a[4], &face_on, pix));
+        let edge_on = Rot::from_rotation_x(std::f64::consts::FRAC_PI_2 - 1e-3);
+        assert!(is_thin(&a[0], &edge_on, pix) && is_thin(&a[4], &edge_on, pix));
+        let normals: Vec<[f64; 3]> = v.iter().map(|p| [0.0, 0.0, p[2].signum()]).collect();
+        let smooth = Mesh::new(v, f, Some(normals), vec![0; 12], 1).unwrap();
+        let s = face_thinness(&smooth);
+        assert!(s.iter().all(|x| (x[3] - t).abs() < 1e-12 && x[2] == 0.0));
+    }
+}
