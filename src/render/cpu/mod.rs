@@ -230,10 +230,12 @@ pub fn add_thin_pixels(
     inner.supersampling = 1;
     let (res, w, ch) = (sensor.resolution, inner.resolution, r.channels);
     let n_prof = r.n_bins * ch;
-    // in chunks of attitudes, so that the thin pass holds at most that many attitudes'
-    // images beside the device's result
-    for (ci, rots) in rotations.chunks(THIN_CHUNK).enumerate() {
-        let first = ci * THIN_CHUNK;
+    // in chunks of attitudes, so that the thin pass holds at most THIN_BYTES of outputs and
+    // working memory (and at most THIN_CHUNK attitudes) beside the device's result
+    let per = attitude_bytes(w, inner.samples, ch, r.n_bins, outputs);
+    let chunk = (THIN_BYTES / per.max(1)).clamp(1, THIN_CHUNK);
+    for (ci, rots) in rotations.chunks(chunk).enumerate() {
+        let first = ci * chunk;
         let t = render_thin_pixels(mesh, &inner, rots, outputs, brdf);
         for (a, b) in r.total[first * ch..].iter_mut().zip(&t.total) {
             *a += b;
@@ -290,8 +292,12 @@ pub fn add_thin_pixels(
     }
 }
 
-/// Attitudes per pass of [`add_thin_pixels`].
+/// The most attitudes per pass of [`add_thin_pixels`].
 const THIN_CHUNK: usize = 64;
+
+/// The most memory one pass of [`add_thin_pixels`] holds ([`attitude_bytes`] per attitude;
+/// one attitude at least).
+const THIN_BYTES: usize = 256 << 20;
 
 #[allow(clippy::too_many_arguments)]
 fn render_pixels(
