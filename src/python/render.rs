@@ -325,7 +325,8 @@ impl PyRenderScene {
         rotations: PyReadonlyArrayDyn<'py, f64>,
         width: usize,
     ) -> PyResult<Bound<'py, numpy::PyArray3<bool>>> {
-        use crate::render::thin::{face_thinness, thin_pixel_mask};
+        use crate::render::cpu::thin_pixel_mask;
+        use crate::render::thin::face_thinness;
         if width == 0 {
             return Err(crate::Error::param("width", width, "a positive number of pixels").into());
         }

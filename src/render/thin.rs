@@ -37,6 +37,7 @@
 
 use crate::optics::frames::V3;
 use crate::render::api::Layout;
+use crate::render::cpu::coverage::clip_edge;
 use crate::render::geometry::{Mesh, Rot};
 
 /// Width (pixels) under which a part is thin: its pixels take its area exactly.
@@ -234,33 +235,6 @@ impl ThinPixels {
     }
 }
 
-/// Whether each pixel of an image `width` pixels across (the renderer's framing, `[-ext,
-/// ext]` with `ext` the mesh's radius) has a thin face at attitude `rot` ([`ThinPixels`];
-/// `thinness` from [`face_thinness`]), row-major.
-pub fn thin_pixel_mask(mesh: &Mesh, thinness: &[[f64; 4]], rot: &Rot, width: usize) -> Vec<bool> {
-    let ext = mesh.radius;
-    let lay = Layout {
-        ext,
-        width,
-        pix: 2.0 * ext / width as f64,
-        r_min: 0.0,
-        n_bins: 0,
-        max_extent: 0.0,
-        support: 0.0,
-    };
-    let vertices: Vec<V3> = mesh
-        .vertices
-        .iter()
-        .map(|&v| crate::render::geometry::rotate(rot, V3::from(v)))
-        .collect();
-    let thin = ThinPixels::new(mesh, thinness, rot, &vertices, &lay);
-    let mut mask = vec![false; width * width];
-    for (k, _) in thin.iter() {
-        mask[k] = true;
-    }
-    mask
-}
-
 /// The shade kernel's words for a chunk of attitudes' [`ThinPixels`] (binding 11 of
 /// `shaders/shade.wgsl`, `n_pix` pixels per attitude): the number of pixels with thin
 /// faces, then per attitude and pixel 0 or the position `p` of its faces (`words[p]` of
@@ -284,23 +258,8 @@ pub fn gpu_words(chunk: &[ThinPixels], n_pix: usize) -> Vec<u32> {
 
 /// The part of triangle `uv` (pixel coordinates) between `v = row` and `v = row + 1`.
 fn clip_rows(uv: &[[f64; 2]; 3], row: f64) -> Vec<[f64; 2]> {
-    let clip = |p: Vec<[f64; 2]>, f: &dyn Fn([f64; 2]) -> f64| -> Vec<[f64; 2]> {
-        let mut out = Vec::with_capacity(p.len() + 2);
-        for k in 0..p.len() {
-            let (a, b) = (p[k], p[(k + 1) % p.len()]);
-            let (fa, fb) = (f(a), f(b));
-            if fa >= 0.0 {
-                out.push(a);
-            }
-            if (fa >= 0.0) != (fb >= 0.0) {
-                let t = fa / (fa - fb);
-                out.push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
-            }
-        }
-        out
-    };
-    let p = clip(uv.to_vec(), &|p| p[1] - row);
-    clip(p, &|p| row + 1.0 - p[1])
+    let p = clip_edge(&uv.to_vec(), [0.0, row], [1.0, 0.0], 1.0);
+    clip_edge(&p, [0.0, row + 1.0], [1.0, 0.0], -1.0)
 }
 
 /// Any unit vector normal to the unit vector `n`.

@@ -117,7 +117,7 @@ fn side(a: [f64; 2], d: [f64; 2], s: f64, x: [f64; 2]) -> f64 {
 }
 
 /// The part of convex `p` where `s cross(d, x - a) >= 0`.
-fn clip_edge(p: &Poly, a: [f64; 2], d: [f64; 2], s: f64) -> Poly {
+pub(crate) fn clip_edge(p: &Poly, a: [f64; 2], d: [f64; 2], s: f64) -> Poly {
     let mut out = Vec::with_capacity(CLIP_VERTS);
     if p.len() < 3 {
         return out;

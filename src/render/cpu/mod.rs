@@ -25,7 +25,7 @@
 //! - here: the renderers and the memory checks ([`check_cpu_render`]).
 
 mod accumulate;
-mod coverage;
+pub(crate) mod coverage;
 mod raster;
 mod shade;
 mod shadow;
@@ -298,6 +298,28 @@ const THIN_CHUNK: usize = 64;
 /// The most memory one pass of [`add_thin_pixels`] holds ([`attitude_bytes`] per attitude;
 /// one attitude at least).
 const THIN_BYTES: usize = 256 << 20;
+
+/// Whether each pixel of an image `width` pixels across (the renderer's framing, `[-ext,
+/// ext]` with `ext` the mesh's radius) has a thin face at attitude `rot` ([`ThinPixels`];
+/// `thinness` from [`face_thinness`]), row-major.
+pub fn thin_pixel_mask(mesh: &Mesh, thinness: &[[f64; 4]], rot: &Rot, width: usize) -> Vec<bool> {
+    let ext = mesh.radius;
+    let lay = Layout {
+        ext,
+        width,
+        pix: 2.0 * ext / width as f64,
+        r_min: 0.0,
+        n_bins: 0,
+        max_extent: 0.0,
+        support: 0.0,
+    };
+    let thin = ThinPixels::new(mesh, thinness, rot, &rotate_vertices(mesh, rot), &lay);
+    let mut mask = vec![false; width * width];
+    for (k, _) in thin.iter() {
+        mask[k] = true;
+    }
+    mask
+}
 
 #[allow(clippy::too_many_arguments)]
 fn render_pixels(
