@@ -48,6 +48,9 @@ import numpy as np
 
 import pprender
 
+#: The repository's docs/ (the pages ``--write`` writes).
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
 RES = 128
 SS_REF = 8
 # (label, quality preset, visibility samples per pixel (None: the preset's), supersampling,
@@ -230,7 +233,7 @@ def main(argv: list[str] | None = None) -> str:
     text = report(measure(repeats=a.repeats, batch=a.batch, device=a.device), a.batch)
     print(text)
     if a.write:
-        path = Path(__file__).resolve().parents[2] / "docs" / "equal-error.md"
+        path = DOCS / "equal-error.md"
         path.write_text(text)
         print(f"wrote {path}")
     return text

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import bench_tradeoff
 
@@ -38,3 +39,15 @@ def test_quick_knobs_each_change_what_they_should():
     assert by[("BRDF", "fast's grid")].pixel_rel > by[("BRDF", "accurate's grid")].pixel_rel
     assert 0 < by[("BRDF", "f64 (default grid)")].pixel_rel < 1e-4
     assert "## One knob at a time" in bench_tradeoff.knobs_text(rows)
+
+
+def test_write_targets_the_repositorys_docs():
+    """``--write`` writes into the repository's docs/ (it pointed one level above the
+    repository after the benchmarks moved out of the package, and failed after the whole
+    run): the pages it writes exist there."""
+    import bench_equal_error
+
+    root = Path(__file__).resolve().parents[1]
+    for mod, page in ((bench_tradeoff, "tradeoff.md"), (bench_equal_error, "equal-error.md")):
+        assert mod.DOCS == root / "docs"
+        assert (mod.DOCS / page).is_file()
