@@ -338,7 +338,7 @@ fn bistatic_shadows_kernel_matches_twin() {
         sensor.bistatic_angle = beta;
         let mut g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
         // (the plate's rims are thinner than a pixel: their pixels are the CPU's)
-        cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf);
+        cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf, None).unwrap();
         let t = cpu::render_cpu(&mesh, &sensor, &rots, out, &brdf);
         let lay = Layout::new(&mesh, &sensor);
         let w = lay.width;
@@ -457,7 +457,7 @@ fn samples_kernel_matches_twin() {
         sensor.bistatic_angle = beta;
         let mut g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
         // (the plate's rims are thinner than a pixel: their pixels are the CPU's)
-        cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf);
+        cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf, None).unwrap();
         let t = cpu::render_cpu(&mesh, &sensor, &rots, out, &brdf);
         let lay = Layout::new(&mesh, &sensor);
         let pix_max = 4.0 * rho * lay.pix * lay.pix;
@@ -578,7 +578,7 @@ fn analytic_kernel_matches_twin() {
         sensor.bistatic_angle = beta;
         let mut g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
         // (the plate's rims are thinner than a pixel: their pixels are the CPU's)
-        cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf);
+        cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf, None).unwrap();
         let t = cpu::render_cpu(&mesh, &sensor, &rots, out, &brdf);
         let lay = Layout::new(&mesh, &sensor);
         let pix_max = 4.0 * rho * lay.pix * lay.pix;
@@ -621,8 +621,18 @@ fn analytic_kernel_matches_twin() {
             let w = lay.width;
             let (seeds, _) = cpu::analytic_seeds(&ids, w, row, col);
             if !seeds.is_empty()
-                && cpu::coverage_parts(&mesh, &vertices, &lay, row, col, &seeds, &[], usize::MAX)
-                    .is_none()
+                && cpu::coverage_parts(
+                    &mesh,
+                    &vertices,
+                    &lay,
+                    row,
+                    col,
+                    &seeds,
+                    &[],
+                    usize::MAX,
+                    cpu::coverage::KERNEL_CAPACITY,
+                )
+                .is_none()
             {
                 n_fallback += 1;
             }
@@ -865,7 +875,7 @@ fn thin_wire_kernel_and_twin_match_the_facet_sum() {
         if !analytic {
             // the device leaves the wire's pixels, every one of them thin, to the CPU
             assert!(g.total.iter().all(|&x| x == 0.0), "{:?}", &g.total[..1]);
-            cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf);
+            cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf, None).unwrap();
         }
         let t = cpu::render_cpu(&mesh, &sensor, &rots, out, &brdf);
         let a = face_thinness(&mesh);
@@ -923,7 +933,7 @@ fn thin_wire_kernel_and_twin_match_the_facet_sum() {
         profile: true,
     };
     let mut g = render(&gpu, &mesh, &tables, &sensor, &rots, out).unwrap();
-    cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf);
+    cpu::add_thin_pixels(&mut g, &mesh, &sensor, &rots, out, &brdf, None).unwrap();
     let t = cpu::render_supersampled(&mesh, &sensor, &rots, out, &brdf);
     let big = t.total.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     for (a, b) in g.total.iter().zip(&t.total) {

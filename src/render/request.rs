@@ -133,7 +133,8 @@ pub fn render(
                 rotations,
                 outputs,
                 &cpu::Tables(&f64_tables),
-            );
+                backend_progress,
+            )?;
             r.stage_seconds
                 .push(("thin pixels (CPU)", started.elapsed().as_secs_f64()));
             (r, g.info.name.clone(), t)

@@ -4,9 +4,9 @@
 //! between two rows of samples is not seen at all). Per attitude the CPU finds the thin
 //! faces ([`is_thin`]) turned toward the receiver and lists, per pixel, those that overlap
 //! it ([`ThinPixels`], exact: each face clipped to each row of pixels).
-//! - With `K > 1` samples such a pixel takes its thin faces' visible parts by exact
-//!   polygon clipping, occluded by each other and by the triangles its samples see, and
-//!   shares the rest of its area among the surfaces its other samples see
+//! - With `K > 1` samples such a pixel takes all its parts by exact polygon clipping,
+//!   seeded by the triangles its samples see (and their neighbours) with its thin faces
+//!   listed, with capacities the kernel's arrays do not limit
 //!   ([`crate::render::cpu::thin_parts`]). It is shaded on the CPU in f64 for every
 //!   backend: the device leaves it empty (`shaders/shade.wgsl`, binding 11) and
 //!   [`crate::render::cpu::add_thin_pixels`] adds it, as the same clipping in a kernel of
@@ -15,7 +15,10 @@
 //!   clipping (`coverage_parts` in `shaders/shared/coverage.wgsl`, twin
 //!   [`crate::render::cpu::coverage_parts`]).
 //! - Where the clipping overflows its capacities, the pixel's samples (or centre) as
-//!   before. One sample per pixel (`"fast"`) is left as it is.
+//!   before: rarely with `K > 1` ([`crate::render::cpu::coverage::THIN_CAPACITY`]); with
+//!   analytic coverage wherever more than 32 triangles overlap a pixel (a 16-sided
+//!   cylinder thinner than a pixel in an open mesh lists its back faces too). One sample
+//!   per pixel (`"fast"`) is left as it is.
 //!
 //! Which faces are thin is decided per face and attitude from a vector computed once per
 //! mesh ([`face_thinness`]), `(a_x, a_y, a_z, s)` in the body frame (m):
@@ -136,9 +139,8 @@ impl ThinPixels {
     /// The thin faces of `mesh` at attitude `rot` (its rotated vertices `vertices`,
     /// [`crate::render::cpu::rotate_vertices`]; `thinness` from [`face_thinness`]) and the
     /// pixels of `lay`'s image each overlaps: each face clipped to each row of pixels it
-    /// spans, the columns from the clipped polygon's extent (exact for a convex polygon
-    /// within a row; pixels it only touches are listed too, and the clipping that uses the
-    /// list drops their zero area).
+    /// spans and to each column of the clipped polygon's extent, listed where it covers
+    /// more than 1e-7 of the pixel (pixels it only touches are not).
     pub fn new(
         mesh: &Mesh,
         thinness: &[[f64; 4]],
@@ -181,7 +183,12 @@ impl ThinPixels {
                 let lo = u_lo.floor().max(0.0) as usize;
                 let hi = (u_hi.floor() + 1.0).min(w as f64) as usize;
                 for col in lo..hi {
-                    pairs.push(((row * w + col) as u32, t as u32));
+                    // (only where it covers some of the pixel: a pixel it merely touches
+                    // keeps its samples, as the same pixel of the same surface cut into
+                    // more triangles would)
+                    if overlap_area(&strip, col as f64) > MIN_OVERLAP {
+                        pairs.push(((row * w + col) as u32, t as u32));
+                    }
                 }
             }
         }
@@ -260,6 +267,25 @@ pub fn gpu_words(chunk: &[ThinPixels], n_pix: usize) -> Vec<u32> {
 fn clip_rows(uv: &[[f64; 2]; 3], row: f64) -> Vec<[f64; 2]> {
     let p = clip_edge(&uv.to_vec(), [0.0, row], [1.0, 0.0], 1.0);
     clip_edge(&p, [0.0, row + 1.0], [1.0, 0.0], -1.0)
+}
+
+/// The least area (pixels) of a face in a pixel for the pixel to list it: the exact
+/// clipping drops parts below 1e-7 of a pixel too.
+const MIN_OVERLAP: f64 = 1e-7;
+
+/// The area (pixels) of the convex polygon `strip` (one row of pixels) within column `col`.
+fn overlap_area(strip: &[[f64; 2]], col: f64) -> f64 {
+    let p = clip_edge(&strip.to_vec(), [col, 0.0], [0.0, 1.0], -1.0);
+    let p = clip_edge(&p, [col + 1.0, 0.0], [0.0, 1.0], 1.0);
+    if p.len() < 3 {
+        return 0.0;
+    }
+    let mut a = 0.0;
+    for k in 0..p.len() {
+        let (u, v) = (p[k], p[(k + 1) % p.len()]);
+        a += u[0] * v[1] - v[0] * u[1];
+    }
+    0.5 * a.abs()
 }
 
 /// Any unit vector normal to the unit vector `n`.

@@ -163,7 +163,9 @@ def render(
         device, after each attitude on the CPU, then from worker threads; with ``bounces``
         > 1 the paths are a second pass, counted in ``total = 2 N``), e.g. to update a
         ``tqdm`` bar. An exception it raises stops the render and propagates; Ctrl-C
-        (KeyboardInterrupt) stops a device render between chunks too.
+        (KeyboardInterrupt) stops a device render between chunks too, and while the CPU
+        shades the pixels with parts thinner than a pixel after the device's last chunk
+        (the callback is then called again with ``done`` equal to the device's count).
 
     Returns
     -------

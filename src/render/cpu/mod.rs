@@ -193,16 +193,17 @@ pub fn render_cpu_with_progress(
 
 /// The pixels with thin faces alone ([`ThinPixels`], `K > 1` samples), as [`render_cpu`]
 /// renders them; every other pixel is left empty. `gpu::render` leaves exactly these
-/// empty, and [`add_thin_pixels`] adds them to its result.
+/// empty, and [`add_thin_pixels`] adds them to its result. `progress` as in
+/// [`render_cpu_with_progress`].
 pub fn render_thin_pixels(
     mesh: &Mesh,
     sensor: &SensorSetup,
     rotations: &[Rot],
     outputs: Outputs,
     brdf: &(impl Brdf + ?Sized),
-) -> Rendered {
-    render_pixels(mesh, sensor, rotations, outputs, brdf, None, true)
-        .expect("without a progress callback nothing cancels")
+    progress: Progress,
+) -> crate::Result<Rendered> {
+    render_pixels(mesh, sensor, rotations, outputs, brdf, progress, true)
 }
 
 /// The pixels with thin faces of a `K > 1` render by `gpu::render` (which leaves them
@@ -213,6 +214,11 @@ pub fn render_thin_pixels(
 /// supersampling), ranges and coverage (merged with the device's covered sub-pixels by
 /// coverage weights), profiles and totals. Nothing to do with one sample per pixel or
 /// analytic coverage (the kernel takes them itself).
+///
+/// `progress`, the device pass's callback, is told `(n, n)` (`n` attitudes, all counted by
+/// the device pass already) after each attitude of this pass, so that a render can still
+/// be stopped during it: `false` returns [`crate::Error::Cancelled`], and `r` is then
+/// incomplete.
 pub fn add_thin_pixels(
     r: &mut Rendered,
     mesh: &Mesh,
@@ -220,10 +226,15 @@ pub fn add_thin_pixels(
     rotations: &[Rot],
     outputs: Outputs,
     brdf: &(impl Brdf + ?Sized),
-) {
+    progress: Progress,
+) -> crate::Result<()> {
     if sensor.samples <= 1 || sensor.analytic {
-        return;
+        return Ok(());
     }
+    let n = rotations.len();
+    let heartbeat = |_: usize, _: usize| progress.is_none_or(|p| p(n, n));
+    let thin_progress: Progress =
+        progress.map(|_| &heartbeat as &(dyn Fn(usize, usize) -> bool + Sync));
     let ss = sensor.supersampling;
     let mut inner = sensor.clone();
     inner.resolution *= ss;
@@ -236,7 +247,7 @@ pub fn add_thin_pixels(
     let chunk = (THIN_BYTES / per.max(1)).clamp(1, THIN_CHUNK);
     for (ci, rots) in rotations.chunks(chunk).enumerate() {
         let first = ci * chunk;
-        let t = render_thin_pixels(mesh, &inner, rots, outputs, brdf);
+        let t = render_thin_pixels(mesh, &inner, rots, outputs, brdf, thin_progress)?;
         for (a, b) in r.total[first * ch..].iter_mut().zip(&t.total) {
             *a += b;
         }
@@ -290,6 +301,7 @@ pub fn add_thin_pixels(
             }
         }
     }
+    Ok(())
 }
 
 /// The most attitudes per pass of [`add_thin_pixels`].
@@ -389,18 +401,7 @@ fn render_pixels(
             if sensor.analytic {
                 parts = analytic_parts(mesh, vertices, &lay, &ids[0], row, col, thin_faces);
             } else if let Some(p) = (!thin_faces.is_empty())
-                .then(|| {
-                    thin_parts(
-                        mesh,
-                        vertices,
-                        &lay,
-                        ids,
-                        &offsets,
-                        mesh.surfaces(),
-                        k,
-                        thin_faces,
-                    )
-                })
+                .then(|| thin_parts(mesh, vertices, &lay, ids, k, thin_faces))
                 .flatten()
             {
                 parts = p;
