@@ -246,7 +246,11 @@ def main(quick: bool = False) -> str:
              "Written by `python scripts/interreflections.py` (its docstring says what each section "
              "measures). pprender traces paths of 2 and 3 bounces on the CPU in f64 for every backend "
              "(`Settings(bounces=..., path_samples=..., path_seed=...)`; the module docs of "
-             "`src/render/paths.rs` give the estimator).", ""]
+             "`src/render/paths/mod.rs` give the estimator). The co- and cross-polarized channels "
+             "against Mitsuba are in [corner-co-cross.md](corner-co-cross.md) (`python "
+             "scripts/corner_co_cross.py --write`); where the light goes (a cavity's energy balance, "
+             "the trihedral's effective area) in [corner-energy.md](corner-energy.md) (`python "
+             "scripts/corner_energy.py --write`).", ""]
     lines += corners(quick)
     lines += cubesat_vs_mitsuba(quick)
     lines += noise_and_cost(quick)
