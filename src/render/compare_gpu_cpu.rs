@@ -629,7 +629,6 @@ fn analytic_kernel_matches_twin() {
                     col,
                     &seeds,
                     &[],
-                    usize::MAX,
                     cpu::coverage::KERNEL_CAPACITY,
                 )
                 .is_none()

@@ -3,7 +3,8 @@
 //! samples in every pixel along it, so its coverage error does not average out, and a wire
 //! between two rows of samples is not seen at all). Per attitude the CPU finds the thin
 //! faces ([`is_thin`]) turned toward the receiver and lists, per pixel, those that overlap
-//! it ([`ThinPixels`], exact: each face clipped to each row of pixels).
+//! it ([`ThinPixels`], exact: each face clipped to each pixel, listed where it covers
+//! more than 1e-7 of it).
 //! - With `K > 1` samples such a pixel takes all its parts by exact polygon clipping,
 //!   seeded by the triangles its samples see (and their neighbours) with its thin faces
 //!   listed, with capacities the kernel's arrays do not limit
@@ -40,7 +41,7 @@
 
 use crate::optics::frames::V3;
 use crate::render::api::Layout;
-use crate::render::cpu::coverage::clip_edge;
+use crate::render::cpu::coverage::{clip_edge, moments};
 use crate::render::geometry::{Mesh, Rot};
 
 /// Width (pixels) under which a part is thin: its pixels take its area exactly.
@@ -277,15 +278,7 @@ const MIN_OVERLAP: f64 = 1e-7;
 fn overlap_area(strip: &[[f64; 2]], col: f64) -> f64 {
     let p = clip_edge(&strip.to_vec(), [col, 0.0], [0.0, 1.0], -1.0);
     let p = clip_edge(&p, [col + 1.0, 0.0], [0.0, 1.0], 1.0);
-    if p.len() < 3 {
-        return 0.0;
-    }
-    let mut a = 0.0;
-    for k in 0..p.len() {
-        let (u, v) = (p[k], p[(k + 1) % p.len()]);
-        a += u[0] * v[1] - v[0] * u[1];
-    }
-    0.5 * a.abs()
+    moments(&p)[0].abs()
 }
 
 /// Any unit vector normal to the unit vector `n`.

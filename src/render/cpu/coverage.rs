@@ -198,7 +198,7 @@ fn clip_triangle(p: &Poly, t: &[[f64; 2]; 3], s: f64) -> Poly {
 }
 
 /// (area, area-weighted u, area-weighted v) of a polygon.
-fn moments(p: &Poly) -> [f64; 3] {
+pub(crate) fn moments(p: &Poly) -> [f64; 3] {
     if p.len() < 3 {
         return [0.0; 3];
     }
@@ -222,12 +222,10 @@ fn moments(p: &Poly) -> [f64; 3] {
 /// examined; back faces skipped on closed meshes);
 /// those overlapping the pixel (at most `cap.cand`) are clipped to it; a visible part is
 /// the clip minus every other candidate that overlaps it and is nearer at the centroid of
-/// their overlap (ties: the lower index), at most `cap.pieces` convex pieces kept; parts
-/// are made of the candidates from the first `n_parted` of the queue (seeds, then listed)
-/// only, the others still occluding them (`usize::MAX` as the kernel does; fewer for
-/// [`thin_parts`], which has no kernel counterpart). `None`
+/// their overlap (ties: the lower index), at most `cap.pieces` convex pieces kept. `None`
 /// when more than `cap.queue` triangles were to be examined or more than `cap.cand` overlap
-/// the pixel ([`KERNEL_CAPACITY`] as the kernel; [`THIN_CAPACITY`] for [`thin_parts`]). `vertices`: the mesh's vertices at the attitude
+/// the pixel ([`KERNEL_CAPACITY`] as the kernel; [`THIN_CAPACITY`] for [`thin_parts`]).
+/// `vertices`: the mesh's vertices at the attitude
 /// ([`rotate_vertices`](super::rotate_vertices)).
 #[allow(clippy::too_many_arguments)]
 pub fn coverage_parts(
@@ -238,7 +236,6 @@ pub fn coverage_parts(
     col: usize,
     seeds: &[usize],
     listed: &[u32],
-    n_parted: usize,
     cap: Capacity,
 ) -> Option<Vec<Part>> {
     let x0 = -lay.ext + col as f64 * lay.pix;
@@ -257,8 +254,6 @@ pub fn coverage_parts(
     // (triangle, uv vertices, orientation, vertex depths)
     #[allow(clippy::type_complexity)]
     let mut tris: Vec<(usize, [[f64; 2]; 3], f64, [f64; 3])> = Vec::new();
-    // each candidate's place in the queue
-    let mut from_q: Vec<usize> = Vec::new();
     let mut qi = 0;
     while qi < queue.len() {
         let t = queue[qi];
@@ -277,7 +272,6 @@ pub fn coverage_parts(
         }
         if overlaps {
             tris.push((t, uv, den.signum(), [p[0][2], p[1][2], p[2][2]]));
-            from_q.push(qi);
         }
         if qi < seeds.len() || (overlaps && qi >= n_listed) {
             for &u in &adj[t] {
@@ -296,10 +290,7 @@ pub fn coverage_parts(
     // the centroid of the overlap (ties: the lower index), unless one of that one's edges
     // separates them
     let mut parts = Vec::new();
-    for (&(t, uv, s, zt), &qi) in tris.iter().zip(&from_q) {
-        if qi >= n_parted {
-            continue;
-        }
+    for &(t, uv, s, zt) in &tris {
         let base = clip_triangle(&unit_square(), &uv, s);
         let mut pieces = vec![base.clone()];
         for &(tj, uj, sj, zj) in &tris {
@@ -411,29 +402,20 @@ pub fn analytic_parts(
             span: [1.0, 1.0],
         }];
     }
-    coverage_parts(
-        mesh,
-        vertices,
-        lay,
-        row,
-        col,
-        &cand,
-        thin,
-        usize::MAX,
-        KERNEL_CAPACITY,
+    coverage_parts(mesh, vertices, lay, row, col, &cand, thin, KERNEL_CAPACITY).unwrap_or_else(
+        || {
+            // too many triangles: the centre sample, as with one sample per pixel
+            match ids[row * lay.width + col] {
+                0 => vec![],
+                id => vec![Part {
+                    tri: id as usize - 1,
+                    frac: 1.0,
+                    centre: [0.5, 0.5],
+                    span: [1.0, 1.0],
+                }],
+            }
+        },
     )
-    .unwrap_or_else(|| {
-        // too many triangles: the centre sample, as with one sample per pixel
-        match ids[row * lay.width + col] {
-            0 => vec![],
-            id => vec![Part {
-                tri: id as usize - 1,
-                frac: 1.0,
-                centre: [0.5, 0.5],
-                span: [1.0, 1.0],
-            }],
-        }
-    })
 }
 
 /// The parts of a pixel with thin faces (`thin`, [`crate::render::thin::ThinPixels`]) and
@@ -464,15 +446,5 @@ pub fn thin_parts(
             seeds.push(id - 1);
         }
     }
-    coverage_parts(
-        mesh,
-        vertices,
-        lay,
-        row,
-        col,
-        &seeds,
-        thin,
-        usize::MAX,
-        THIN_CAPACITY,
-    )
+    coverage_parts(mesh, vertices, lay, row, col, &seeds, thin, THIN_CAPACITY)
 }
