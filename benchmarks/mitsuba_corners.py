@@ -589,29 +589,50 @@ def mitsuba_totals(mesh: trimesh.Trimesh, bsdf: dict[str, Any], rotations: Any, 
     mi = mitsuba(threads)
     rots = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
     ext = extent(mesh)
-    delta = 2.0 * ext / resolution
+    b = _wrapped_bsdf(mesh, bsdf, rots, two_sided)
+    scene_dict = {
+        "type": "scene",
+        "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": int(max_depth)}},
+        "sensor": {
+            "type": "orthographic",
+            "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 4 * ext], target=[0, 0, 0], up=[0, 1, 0])
+            @ mi.ScalarTransform4f.scale([ext, ext, 1.0]),
+            "film": {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
+                     "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent"},
+        },
+        "emitter": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
+    }
+    totals, images = _render_attitudes(mi, scene_dict, mesh, b, rots, spp, seed, resolution, return_images)
+    if images is not None:
+        return totals, images
+    return totals
+
+
+def _wrapped_bsdf(mesh: trimesh.Trimesh, bsdf: dict[str, Any], rots: np.ndarray, two_sided: bool) -> dict[str, Any]:
+    """``bsdf`` wrapped in ``twosided`` when ``two_sided``, warning for every attitude that
+    lights a back face (the module docstring's polarization caveat)."""
     for r in rots:
         if two_sided and _lit_back_faces(mesh, r):
             warnings.warn("a back face is lit: Mitsuba's twosided gives it a mirrored Stokes frame "
-                          "(S1..S3 after several bounces are unreliable)", stacklevel=2)
-    b = {"type": "twosided", "bsdf": dict(bsdf)} if two_sided else dict(bsdf)
+                          "(S1..S3 after several bounces are unreliable)", stacklevel=3)
+    return {"type": "twosided", "bsdf": dict(bsdf)} if two_sided else dict(bsdf)
+
+
+def _render_attitudes(mi: Any, scene_dict: dict[str, Any], mesh: trimesh.Trimesh, bsdf: dict[str, Any],
+                      rots: np.ndarray, spp: int, seed: int, resolution: int,
+                      return_images: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """Load ``scene_dict`` with ``mesh`` (PLY, face normals, ``bsdf``) as its ``shape``, then
+    render it at each attitude of ``rots`` by rotating the shape's vertices in place (the
+    sensor stays put): the (N, 4) Stokes cross-sections ``4 pi delta^2 sum(pixels)`` (m^2,
+    float64 sums of the float32 images) and, with ``return_images``, the (N, res, res, 4)
+    images (else None)."""
+    delta = 2.0 * extent(mesh) / resolution
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "mesh.ply")
         trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False).export(path)
-        scene = mi.load_dict({
-            "type": "scene",
-            "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": int(max_depth)}},
-            "sensor": {
-                "type": "orthographic",
-                "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 4 * ext], target=[0, 0, 0], up=[0, 1, 0])
-                @ mi.ScalarTransform4f.scale([ext, ext, 1.0]),
-                "film": {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
-                         "rfilter": {"type": "box"}},
-                "sampler": {"type": "independent"},
-            },
-            "emitter": {"type": "directional", "direction": [0, 0, -1], "irradiance": 1.0},
-            "shape": {"type": "ply", "filename": path, "face_normals": True, "bsdf": b},
-        })
+        scene = mi.load_dict({**scene_dict, "shape": {"type": "ply", "filename": path, "face_normals": True,
+                                                       "bsdf": bsdf}})
     params = mi.traverse(scene)
     body = np.array(params["shape.vertex_positions"], dtype=np.float64).reshape(-1, 3)
     totals = np.zeros((len(rots), 4))
@@ -626,9 +647,7 @@ def mitsuba_totals(mesh: trimesh.Trimesh, bsdf: dict[str, Any], rotations: Any, 
         totals[i] = 4.0 * math.pi * delta**2 * st.astype(np.float64).sum(axis=(0, 1))
         if images is not None:
             images[i] = st
-    if images is not None:
-        return totals, images
-    return totals
+    return totals, images
 
 
 # Angle (rad) between the polarized set-up's illumination and the line of sight, taken with
@@ -719,14 +738,9 @@ def mitsuba_polarized_totals(mesh: trimesh.Trimesh, bsdf: dict[str, Any], rotati
     mi = mitsuba(threads)
     rots = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
     ext = extent(mesh)
-    delta = 2.0 * ext / resolution
-    for r in rots:
-        if two_sided and _lit_back_faces(mesh, r):
-            warnings.warn("a back face is lit: Mitsuba's twosided gives it a mirrored Stokes frame "
-                          "(S1..S3 after several bounces are unreliable)", stacklevel=2)
+    b = _wrapped_bsdf(mesh, bsdf, rots, two_sided)
     if emitter_tilt < 0:
         raise ValueError(f"emitter_tilt must be >= 0, got {emitter_tilt}")
-    b = {"type": "twosided", "bsdf": dict(bsdf)} if two_sided else dict(bsdf)
     T = mi.ScalarTransform4f
     tilts = [emitter_tilt, -emitter_tilt] if emitter_tilt > 0 else [0.0]
     totals = np.zeros((len(rots), 4))
@@ -753,23 +767,10 @@ def mitsuba_polarized_totals(mesh: trimesh.Trimesh, bsdf: dict[str, Any], rotati
                 to_world = to_world @ T.rotate([1, 0, 0], 180.0)
             scene_dict["sheet"] = {"type": "rectangle", "to_world": to_world,
                                    "bsdf": {"type": "polarizer", "theta": float(polarizer_deg)}}
-        with tempfile.TemporaryDirectory() as tmp:
-            path = os.path.join(tmp, "mesh.ply")
-            trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False).export(path)
-            scene_dict["shape"] = {"type": "ply", "filename": path, "face_normals": True, "bsdf": b}
-            scene = mi.load_dict(scene_dict)
-        params = mi.traverse(scene)
-        body = np.array(params["shape.vertex_positions"], dtype=np.float64).reshape(-1, 3)
-        for i, r in enumerate(rots):
-            params["shape.vertex_positions"] = mi.Float((body @ r.T).astype(np.float32).ravel())
-            params.update()
-            img = np.asarray(mi.render(scene, spp=int(spp), seed=int(seed)))
-            if img.shape[-1] != 13:
-                raise RuntimeError(f"unexpected film channels {img.shape}: expected Y + S0..S3 x 3")
-            st = img[..., [1, 4, 7, 10]]
-            totals[i] += 4.0 * math.pi * delta**2 * st.astype(np.float64).sum(axis=(0, 1)) / len(tilts)
-            if images is not None:
-                images[i] += st / len(tilts)
+        t, im = _render_attitudes(mi, scene_dict, mesh, b, rots, spp, seed, resolution, return_images)
+        totals += t / len(tilts)
+        if images is not None and im is not None:
+            images += im / len(tilts)
     if images is not None:
         return totals, images
     return totals

@@ -193,10 +193,7 @@ def rough_mirror_trace(mesh: trimesh.Trimesh, direction: Sequence[float], alpha:
             cos_i = -np.einsum("ij,ij->i", kk, n)
             if np.any(cos_i <= 0.0):
                 raise RuntimeError("a ray reached the back of a single-sided plate")
-            helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-            t1 = np.cross(helper, n)
-            t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-            t2 = np.cross(n, t1)
+            t1, t2 = mc._batch_basis(n)  # (a tangent basis at each hit)
             out = np.zeros_like(kk)
             bound = cos_i + np.sqrt(1.0 - cos_i**2) * 6.0 * alpha / math.sqrt(2.0)
             todo = np.arange(len(alive))
