@@ -1,6 +1,7 @@
 //! Inter-reflections between the parts of a mesh: the light that reaches a pixel's surface
 //! after one or two reflections off other surfaces (paths of 2 and 3 bounces), by Monte
-//! Carlo path sampling in f64 on the CPU with ray casting against the mesh ([`Bvh`]). The
+//! Carlo path sampling in f64 on the CPU with ray casting against the mesh ([`Bvh`], built
+//! once per render in the mesh's own frame, where its boxes fit the parts they hold). The
 //! single bounce stays with the backend's renderer; [`crate::render::request::render`]
 //! adds these paths to its outputs for every backend. Conventions: [`crate::render`].
 //!
@@ -99,7 +100,7 @@ mod transmitter;
 pub use lobes::{lobes_from_weights, Lobes, Materials, PathBrdf, MIN_LOBE_P};
 use lobes::{lobes_toward, pdf, sample};
 use mirrors::{aim, Mirrors};
-use posed::{covered_pixels, no_interreflections, surface_areas, Posed, Vertex};
+use posed::{covered_pixels, mesh_bvh, no_interreflections, surface_areas, Posed, Vertex};
 pub use posed::{has_no_interreflections, open_sides};
 use receiver::render_rows;
 pub use rng::{hash32, uniforms, PixelRng, DIMS};
@@ -352,10 +353,10 @@ pub fn render_paths_with(
         open_sides(mesh)
     };
     let skip = orders == 0 || no_interreflections(mesh, &open);
-    let areas = if skip {
-        Vec::new()
+    let (areas, bvh) = if skip {
+        (Vec::new(), Bvh::new(&[]))
     } else {
-        surface_areas(mesh)
+        (surface_areas(mesh), mesh_bvh(mesh))
     };
     let blocks: Vec<std::ops::Range<usize>> = (0..w)
         .step_by(ROWS_PER_BLOCK)
@@ -380,7 +381,7 @@ pub fn render_paths_with(
         if skip || cancelled.load(Relaxed) {
             return sums;
         }
-        let posed = Posed::new(mesh, rot, &open);
+        let posed = Posed::new(mesh, rot, &open, &bvh);
         let seen = covered_pixels(&posed.tris, V3::X, V3::Y, w, lay.ext);
         let mirrors = if strategies.aim && orders >= 2 {
             Mirrors::new(&posed, brdf, wi, &areas)

@@ -90,20 +90,36 @@ pub(super) struct Vertex {
     pub(super) tri: usize,
 }
 
-/// The mesh in one attitude: its rotated triangles in a [`Bvh`] and what a hit needs.
+/// The mesh in one attitude: its rotated triangles and what a hit needs, with the mesh's
+/// [`Bvh`] in its own frame (built once for every attitude: rays are turned into the mesh's
+/// frame, `R^T o + t R^T d`, which leaves `t` and the barycentrics as they are).
 pub(super) struct Posed<'a> {
     pub(super) mesh: &'a Mesh,
     pub(super) rot: &'a Rot,
     /// [`open_sides`] of the mesh.
     pub(super) open: &'a [[bool; 2]],
     pub(super) tris: Vec<[V3; 3]>,
-    pub(super) bvh: Bvh,
+    /// The tree over the mesh's unrotated triangles ([`mesh_bvh`]).
+    pub(super) bvh: &'a Bvh,
+    /// `R^T`: the telescope frame to the mesh's.
+    to_mesh: Rot,
     /// Ray origins leave a surface by this much along its normal (m).
     pub(super) eps: f64,
 }
 
+/// The [`Bvh`] of `mesh` in its own frame, shared by every attitude's [`Posed`].
+pub(super) fn mesh_bvh(mesh: &Mesh) -> Bvh {
+    let vs: Vec<V3> = mesh.vertices.iter().map(|&v| V3::from(v)).collect();
+    let tris: Vec<[V3; 3]> = mesh
+        .faces
+        .iter()
+        .map(|f| f.map(|k| vs[k as usize]))
+        .collect();
+    Bvh::new(&tris)
+}
+
 impl<'a> Posed<'a> {
-    pub(super) fn new(mesh: &'a Mesh, rot: &'a Rot, open: &'a [[bool; 2]]) -> Self {
+    pub(super) fn new(mesh: &'a Mesh, rot: &'a Rot, open: &'a [[bool; 2]], bvh: &'a Bvh) -> Self {
         let vs: Vec<V3> = mesh
             .vertices
             .iter()
@@ -114,20 +130,25 @@ impl<'a> Posed<'a> {
             .iter()
             .map(|f| f.map(|k| vs[k as usize]))
             .collect();
-        let bvh = Bvh::new(&tris);
         Posed {
             mesh,
             rot,
             open,
             tris,
             bvh,
+            to_mesh: rot.transpose(),
             eps: 1e-9 * mesh.radius,
         }
     }
 
     /// The first surface along `o + t d` (`t > 0`), with its normals facing `-d`.
     pub(super) fn trace(&self, o: V3, d: V3) -> Option<Vertex> {
-        let hit = self.bvh.closest_hit(o, d, 0.0, f64::INFINITY)?;
+        let hit = self.bvh.closest_hit(
+            rotate(&self.to_mesh, o),
+            rotate(&self.to_mesh, d),
+            0.0,
+            f64::INFINITY,
+        )?;
         let [a, b, c] = self.tris[hit.tri];
         let p = a + hit.u * (b - a) + hit.v * (c - a);
         let mut ng = normalize(cross(b - a, c - a));
@@ -149,6 +170,17 @@ impl<'a> Posed<'a> {
         })
     }
 
+    /// Whether the ray `o + t d` (`t > 0`) meets a face of the mesh other than `skip`.
+    pub(super) fn blocked(&self, o: V3, d: V3, skip: Option<usize>) -> bool {
+        self.bvh.any_hit(
+            rotate(&self.to_mesh, o),
+            rotate(&self.to_mesh, d),
+            0.0,
+            f64::INFINITY,
+            skip,
+        )
+    }
+
     /// Whether anything of the mesh lies on the side of `v`'s face that `v.ng` points to.
     pub(super) fn side_open(&self, v: &Vertex) -> bool {
         let [a, b, c] = self.tris[v.tri];
@@ -162,9 +194,7 @@ impl<'a> Posed<'a> {
     pub(super) fn sees(&self, v: &Vertex, w: V3) -> bool {
         dot(v.ng, w) > 0.0
             && dot(v.n, w) > 0.0
-            && !self
-                .bvh
-                .any_hit(v.p + self.eps * v.ng, w, 0.0, f64::INFINITY, Some(v.tri))
+            && !self.blocked(v.p + self.eps * v.ng, w, Some(v.tri))
     }
 }
 

@@ -432,7 +432,8 @@ fn closed_sides_let_no_ray_meet_the_mesh() {
     for mesh in [dih, crate::render::test_scenes::sphere_and_plate()] {
         let open = open_sides(&mesh);
         let rot = Rot::IDENTITY;
-        let posed = Posed::new(&mesh, &rot, &open);
+        let bvh = posed::mesh_bvh(&mesh);
+        let posed = Posed::new(&mesh, &rot, &open, &bvh);
         let mut closed_checked = 0;
         for (t, tri) in posed.tris.iter().enumerate() {
             let wn = normalize(cross(tri[1] - tri[0], tri[2] - tri[0]));
@@ -448,10 +449,7 @@ fn closed_sides_let_no_ray_meet_the_mesh() {
                     let p = tri[0] + a * (tri[1] - tri[0]) + b * (tri[2] - tri[0]);
                     let d = normalize(V3::new(rand() - 0.5, rand() - 0.5, rand() - 0.5));
                     let d = if dot(d, wn) * sign > 0.0 { d } else { -d };
-                    let hit =
-                        posed
-                            .bvh
-                            .any_hit(p + 1e-9 * sign * wn, d, 0.0, f64::INFINITY, Some(t));
+                    let hit = posed.blocked(p + 1e-9 * sign * wn, d, Some(t));
                     assert!(!hit, "face {t} side {side}: a ray met the mesh");
                     closed_checked += 1;
                 }
