@@ -315,6 +315,10 @@ fn box_moments<T: PulseFloat>(w: T) -> [T; 6] {
 fn cdf_std<T: PulseFloat>(y: T, aa: T, bb: T) -> T {
     let c = T::lit;
     let inv_fact = T::INV_FACT_EVEN;
+    if aa == T::zero() {
+        // a point (`bb <= aa`): every moment below is 0, and so is the correction
+        return norm_cdf_t(y.clamp(-T::T_CLAMP, T::T_CLAMP));
+    }
     if aa < T::ALPHA {
         let y = y.clamp(-T::T_CLAMP, T::T_CLAMP);
         let ma = box_moments(aa);
