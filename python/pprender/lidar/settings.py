@@ -130,13 +130,19 @@ class Settings:
         bounces). A convex or flat mesh traces nothing. The surfaces met along a path are
         evaluated without the double-bounce term.
     path_samples : int, optional
-        Paths per pixel with ``bounces`` > 1, in [1, 65536]; given explicitly, it overrides
-        the ``quality`` preset's (4, 16, 64, 256 for fast, balanced, accurate, reference).
-        The noise falls about as ``1 / sqrt(path_samples)``.
+        Paths per pixel with ``bounces`` > 1, in [1, 65536], on average over the pixels the
+        mesh may cover: they are drawn only in the pixels of surfaces that face another part
+        of the mesh (the others have no inter-reflections), so a satellite whose corners fill
+        a few pixels draws many paths there. Given explicitly, it overrides the ``quality``
+        preset's (4, 16, 64, 256 for fast, balanced, accurate, reference). The noise falls
+        about as ``1 / sqrt(path_samples)``.
     path_seed : int, optional
         Seed of the paths' random numbers, in [0, 2**32 - 1] (default 0). They depend on the
-        seed and the pixel only: the same seed gives the same bits, in a batch or one
-        attitude at a time, and a fit sees common random numbers from step to step.
+        seed, the pixel and its number of paths only: the same seed gives the same bits, in
+        a batch or one attitude at a time, and a fit sees common random numbers from step to
+        step (a pixel's number of paths, ``path_samples`` times a power of two, changes only
+        where the share of the mesh's pixels facing other parts crosses a power of
+        sqrt(2)).
 
     Raises
     ------

@@ -46,17 +46,22 @@
 //! (`mirrors.rs`: the metal-paint-metal corner, which neither end draws well). Each strategy
 //! alone is unbiased (tests); with the defaults all are on.
 //!
-//! **Work skipped** (the same sums): pixels no triangle's box covers, surfaces with
-//! nothing of the mesh on the side a path would leave from ([`open_sides`]), and whole
-//! meshes that cannot reflect onto themselves ([`has_no_interreflections`]).
+//! **Where the paths go** (`allocate.rs`): each strategy draws only in the pixels that
+//! faces open toward its end may cover (a surface with nothing of the mesh on the side a
+//! path would leave from, [`open_sides`], starts no path), and the budget of `N` paths
+//! for every pixel the mesh may cover is shared evenly among those, about `N M / M_open`
+//! each;
+//! whole meshes that cannot reflect onto themselves are skipped
+//! ([`has_no_interreflections`]). The balance heuristic weighs each strategy by its count
+//! where it drew the path.
 //!
-//! **Random numbers.** A pixel's `N` paths use scrambled Sobol' points ([`uniforms`]:
+//! **Random numbers.** A pixel's `n` paths use scrambled Sobol' points ([`uniforms`]:
 //! three sets, shuffled and Owen-scrambled by hashes of `(seed, pixel, set)`, Burley
 //! 2020), stratified in each dimension and jointly in the pairs that draw a point or a
-//! direction. They depend on the seed and the pixel only, not on the attitude
-//! or its place in the batch: a batch equals single calls bit for bit, and a fit that moves
-//! the attitude sees common random numbers (its objective does not jitter from step to
-//! step).
+//! direction. They depend on the seed, the pixel and the pixel's count only, not on the
+//! attitude or its place in the batch: a batch equals single calls bit for bit, and a fit
+//! that moves the attitude sees common random numbers (its objective does not jitter from
+//! step to step, except at the rare steps where a count changes, `allocate.rs`).
 //!
 //! **What a surface along a path is evaluated with.** Its material's single, multiple and
 //! diffuse terms ([`crate::brdf::terms::sum_terms_except`] without the double bounce: its
@@ -90,6 +95,7 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::sync::Arc;
 
+mod allocate;
 mod lobes;
 mod mirrors;
 mod posed;
@@ -97,6 +103,7 @@ mod receiver;
 mod rng;
 mod transmitter;
 
+use allocate::Counts;
 pub use lobes::{lobes_from_weights, Lobes, Materials, PathBrdf, MIN_LOBE_P};
 use lobes::{lobes_toward, pdf, sample};
 use mirrors::{aim, Mirrors};
@@ -157,8 +164,10 @@ struct Setup<'a> {
     edges: Vec<f64>,
     ch: usize,
     orders: usize,
-    /// Each path's share of the pixel: `4 pi delta^2 / N`.
-    weight: f64,
+    /// A pixel's `4 pi delta^2`: each of its `n` paths carries `1 / n` of it.
+    area: f64,
+    /// The seed of the receiver's strategy (the transmitter's is salted from it).
+    seed: u32,
     strategies: Strategies,
     /// The transmitter's image plane: unit `tx_u`, `tx_v` normal to `wi` (`= X`, `Y`
     /// monostatic), spanning the same square as the receiver's.
@@ -203,7 +212,36 @@ fn lobe_density(brdf: &(impl PathBrdf + ?Sized), v: &Vertex, w_out: V3, w: V3) -
     }
 }
 
-impl Setup<'_> {
+impl<'a> Setup<'a> {
+    fn new(mesh: &Mesh, sensor: &'a SensorSetup, strategies: Strategies) -> Self {
+        let lay = Layout::new(mesh, sensor);
+        let beta = sensor.bistatic_angle;
+        let wi = V3::new(beta.sin(), 0.0, beta.cos());
+        let k_in = -wi;
+        let x_in_t = normalize(cross(k_in, V3::Y));
+        let pix = 2.0 * lay.ext / sensor.resolution as f64;
+        Setup {
+            sensor,
+            lay,
+            width: sensor.resolution,
+            pix,
+            wi,
+            wo: V3::Z,
+            x_in_t,
+            y_in_t: cross(k_in, x_in_t),
+            edges: (0..=lay.n_bins)
+                .map(|k| lay.r_min + k as f64 * sensor.bin_width)
+                .collect(),
+            ch: sensor.channels(),
+            orders: sensor.paths.bounces.saturating_sub(1),
+            area: 4.0 * PI * pix * pix,
+            seed: sensor.paths.seed,
+            strategies,
+            tx_u: normalize(cross(V3::Y, wi)),
+            tx_v: cross(wi, normalize(cross(V3::Y, wi))),
+        }
+    }
+
     /// The point of pixel `(row, col)` of the image plane at the offsets `u[0]`, `u[1]`
     /// (pixel units from its top-left corner, rows down).
     fn point_in_pixel(&self, row: usize, col: usize, u: [f64; 3]) -> (f64, f64) {
@@ -226,9 +264,10 @@ impl Setup<'_> {
     }
 
     /// Add one path of the pixel, its Mueller matrix `m` from the transmitter (basis
-    /// `x_in`) to the receiver (basis `x_out`) landing at range `r`, to the pixel's sums
-    /// `px` and to `profile` (when kept); a path with a value that is not finite adds
-    /// nothing.
+    /// `x_in`) to the receiver (basis `x_out`) landing at range `r`, times `weight` (the
+    /// path's share of the pixel), to the pixel's sums `px` and to `profile` (when kept); a
+    /// path with a value that is not finite adds nothing.
+    #[allow(clippy::too_many_arguments)]
     fn add_path(
         &self,
         px: &mut [f64; 16],
@@ -237,8 +276,9 @@ impl Setup<'_> {
         x_in: V3,
         x_out: V3,
         r: f64,
+        weight: f64,
     ) {
-        let vals = self.channels(m, x_in, x_out, self.weight);
+        let vals = self.channels(m, x_in, x_out, weight);
         if !vals.iter().all(|x| x.is_finite()) {
             return;
         }
@@ -267,6 +307,15 @@ impl Setup<'_> {
                 }
             }
         });
+    }
+
+    /// The transmitter's pixel (row-major index) that the point `p` is lit in, if any.
+    fn tx_pixel(&self, p: V3) -> Option<usize> {
+        let ext = self.lay.ext;
+        let c = ((dot(p, self.tx_u) + ext) / self.pix).floor();
+        let r = ((ext - dot(p, self.tx_v)) / self.pix).floor();
+        let w = self.width as f64;
+        (c >= 0.0 && r >= 0.0 && c < w && r < w).then(|| r as usize * self.width + c as usize)
     }
 
     /// The telescope's channels of the path matrix `m` whose input is in the basis `x_in`
@@ -320,33 +369,9 @@ pub fn render_paths_with(
     progress_offset: (usize, usize),
     strategies: Strategies,
 ) -> Result<Vec<PathSums>> {
-    let lay = Layout::new(mesh, sensor);
-    let orders = sensor.paths.bounces.saturating_sub(1);
-    let beta = sensor.bistatic_angle;
-    let wi = V3::new(beta.sin(), 0.0, beta.cos());
-    let k_in = -wi;
-    let x_in_t = normalize(cross(k_in, V3::Y));
-    let pix = 2.0 * lay.ext / sensor.resolution as f64;
-    let setup = Setup {
-        sensor,
-        lay,
-        width: sensor.resolution,
-        pix,
-        wi,
-        wo: V3::Z,
-        x_in_t,
-        y_in_t: cross(k_in, x_in_t),
-        edges: (0..=lay.n_bins)
-            .map(|k| lay.r_min + k as f64 * sensor.bin_width)
-            .collect(),
-        ch: sensor.channels(),
-        orders,
-        weight: 4.0 * PI * pix * pix / sensor.paths.samples as f64,
-        strategies,
-        tx_u: normalize(cross(V3::Y, wi)),
-        tx_v: cross(wi, normalize(cross(V3::Y, wi))),
-    };
-    let (w, ch, nb) = (setup.width, setup.ch, lay.n_bins);
+    let setup = Setup::new(mesh, sensor, strategies);
+    let (lay, orders, wi) = (setup.lay, setup.orders, setup.wi);
+    let w = setup.width;
     let open = if orders == 0 {
         Vec::new()
     } else {
@@ -358,15 +383,12 @@ pub fn render_paths_with(
     } else {
         (surface_areas(mesh), mesh_bvh(mesh))
     };
-    let blocks: Vec<std::ops::Range<usize>> = (0..w)
-        .step_by(ROWS_PER_BLOCK)
-        .map(|r| r..(r + ROWS_PER_BLOCK).min(w))
-        .collect();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cancelled = std::sync::atomic::AtomicBool::new(false);
+    let (ch, nb) = (setup.ch, lay.n_bins);
     let one = |rot: &Rot| -> PathSums {
         use std::sync::atomic::Ordering::Relaxed;
-        let mut sums = PathSums {
+        let sums = PathSums {
             image: vec![
                 0.0;
                 if outputs.image {
@@ -382,55 +404,13 @@ pub fn render_paths_with(
             return sums;
         }
         let posed = Posed::new(mesh, rot, &open, &bvh);
-        let seen = covered_pixels(&posed.tris, V3::X, V3::Y, w, lay.ext);
         let mirrors = if strategies.aim && orders >= 2 {
             Mirrors::new(&posed, brdf, wi, &areas)
         } else {
             Mirrors::none(mesh.faces.len())
         };
-        let parts: Vec<PathSums> = blocks
-            .par_iter()
-            .map(|r| render_rows(&setup, &posed, brdf, r.clone(), outputs, &seen, &mirrors))
-            .collect();
-        for (r, part) in blocks.iter().zip(parts) {
-            if outputs.image {
-                let n_rows = r.len();
-                for order in 0..orders {
-                    let src = &part.image[order * n_rows * w * ch..(order + 1) * n_rows * w * ch];
-                    let at = (order * w + r.start) * w * ch;
-                    sums.image[at..at + src.len()].copy_from_slice(src);
-                }
-            }
-            for (a, b) in sums.profile.iter_mut().zip(&part.profile) {
-                *a += b;
-            }
-            for (a, b) in sums.total.iter_mut().zip(&part.total) {
-                *a += b;
-            }
-        }
-        if strategies.transmitter {
-            let lit = covered_pixels(&posed.tris, setup.tx_u, setup.tx_v, w, lay.ext);
-            let parts: Vec<TxSums> = blocks
-                .par_iter()
-                .map(|r| render_tx_rows(&setup, &posed, brdf, r.clone(), outputs, &lit))
-                .collect();
-            for part in parts {
-                for (pixel, vals) in part.splats {
-                    for (x, v) in sums.image[pixel * ch..(pixel + 1) * ch]
-                        .iter_mut()
-                        .zip(&vals)
-                    {
-                        *x += v;
-                    }
-                }
-                for (a, b) in sums.profile.iter_mut().zip(&part.profile) {
-                    *a += b;
-                }
-                for (a, b) in sums.total.iter_mut().zip(&part.total) {
-                    *a += b;
-                }
-            }
-        }
+        let counts = Counts::new(&setup, &posed, sensor.paths.samples, strategies.transmitter);
+        let sums = trace(&setup, &posed, brdf, outputs, &counts, &mirrors);
         if let Some(report) = progress {
             let (offset, total) = progress_offset;
             if !report(offset + done.fetch_add(1, Relaxed) + 1, total) {
@@ -444,6 +424,78 @@ pub fn render_paths_with(
         return Err(Error::Cancelled);
     }
     Ok(sums)
+}
+
+/// The paths of one attitude from each strategy ([`Counts`] per pixel).
+fn trace(
+    setup: &Setup<'_>,
+    posed: &Posed<'_>,
+    brdf: &(impl PathBrdf + ?Sized),
+    outputs: Outputs,
+    counts: &Counts,
+    mirrors: &Mirrors,
+) -> PathSums {
+    let (w, ch, orders) = (setup.width, setup.ch, setup.orders);
+    let nb = setup.lay.n_bins;
+    let mut sums = PathSums {
+        image: vec![
+            0.0;
+            if outputs.image {
+                orders * w * w * ch
+            } else {
+                0
+            }
+        ],
+        profile: vec![0.0; if outputs.profile { orders * nb * ch } else { 0 }],
+        total: vec![0.0; orders * ch],
+    };
+    let blocks: Vec<std::ops::Range<usize>> = (0..w)
+        .step_by(ROWS_PER_BLOCK)
+        .map(|r| r..(r + ROWS_PER_BLOCK).min(w))
+        .collect();
+    let parts: Vec<PathSums> = blocks
+        .par_iter()
+        .map(|r| render_rows(setup, posed, brdf, r.clone(), outputs, counts, mirrors))
+        .collect();
+    for (r, part) in blocks.iter().zip(parts) {
+        if outputs.image {
+            let n_rows = r.len();
+            for order in 0..orders {
+                let src = &part.image[order * n_rows * w * ch..(order + 1) * n_rows * w * ch];
+                let at = (order * w + r.start) * w * ch;
+                sums.image[at..at + src.len()].copy_from_slice(src);
+            }
+        }
+        for (a, b) in sums.profile.iter_mut().zip(&part.profile) {
+            *a += b;
+        }
+        for (a, b) in sums.total.iter_mut().zip(&part.total) {
+            *a += b;
+        }
+    }
+    if setup.strategies.transmitter {
+        let parts: Vec<TxSums> = blocks
+            .par_iter()
+            .map(|r| render_tx_rows(setup, posed, brdf, r.clone(), outputs, counts))
+            .collect();
+        for part in parts {
+            for (pixel, vals) in part.splats {
+                for (x, v) in sums.image[pixel * ch..(pixel + 1) * ch]
+                    .iter_mut()
+                    .zip(&vals)
+                {
+                    *x += v;
+                }
+            }
+            for (a, b) in sums.profile.iter_mut().zip(&part.profile) {
+                *a += b;
+            }
+            for (a, b) in sums.total.iter_mut().zip(&part.total) {
+                *a += b;
+            }
+        }
+    }
+    sums
 }
 
 /// Bytes [`render_paths`] and [`add_paths`] hold at their peak for `n` attitudes: the

@@ -199,25 +199,61 @@ impl<'a> Posed<'a> {
 }
 
 /// The pixels of a `w x w` image of the square `[-ext, ext]^2` (row 0 at the top) that
-/// the triangles may cover, projected on the axes `(u, v)`: each triangle's bounding box,
-/// widened by a pixel (conservative: no pixel with a triangle in it is left out).
+/// the triangles may cover, projected on the axes `(u, v)`: those whose square, widened by
+/// `1e-3` of a pixel on every side, a triangle overlaps (the separating-axis test against
+/// its box and its edges' normals; conservative: no pixel with a triangle in it is left
+/// out, and a long thin triangle across the image marks the pixels along it, not its
+/// whole box).
 pub(super) fn covered_pixels(tris: &[[V3; 3]], u: V3, v: V3, w: usize, ext: f64) -> Vec<bool> {
     let mut mask = vec![false; w * w];
     let pix = 2.0 * ext / w as f64;
     let last = (w - 1) as f64;
+    // pixel units: x to the right from the image's left edge, y down from its top
+    let half = 0.5 + 1e-3;
     for t in tris {
-        let xs = t.map(|p| dot(p, u));
-        let ys = t.map(|p| dot(p, v));
-        let (x0, x1) = (xs[0].min(xs[1]).min(xs[2]), xs[0].max(xs[1]).max(xs[2]));
-        let (y0, y1) = (ys[0].min(ys[1]).min(ys[2]), ys[0].max(ys[1]).max(ys[2]));
-        let c0 = ((x0 + ext) / pix - 1.0).floor().clamp(0.0, last) as usize;
-        let c1 = ((x1 + ext) / pix + 1.0).floor().clamp(0.0, last) as usize;
-        let r0 = ((ext - y1) / pix - 1.0).floor().clamp(0.0, last) as usize;
-        let r1 = ((ext - y0) / pix + 1.0).floor().clamp(0.0, last) as usize;
+        let p = t.map(|q| ((dot(q, u) + ext) / pix, (ext - dot(q, v)) / pix));
+        if p.iter().any(|&(x, y)| !(x.is_finite() && y.is_finite())) {
+            continue;
+        }
+        let (x0, x1) = (
+            p[0].0.min(p[1].0).min(p[2].0),
+            p[0].0.max(p[1].0).max(p[2].0),
+        );
+        let (y0, y1) = (
+            p[0].1.min(p[1].1).min(p[2].1),
+            p[0].1.max(p[1].1).max(p[2].1),
+        );
+        if x1 < -1.0 || y1 < -1.0 || x0 > w as f64 + 1.0 || y0 > w as f64 + 1.0 {
+            continue;
+        }
+        let c0 = (x0 - 1.0).floor().clamp(0.0, last) as usize;
+        let c1 = (x1 + 1.0).floor().clamp(0.0, last) as usize;
+        let r0 = (y0 - 1.0).floor().clamp(0.0, last) as usize;
+        let r1 = (y1 + 1.0).floor().clamp(0.0, last) as usize;
+        // each edge's normal (nx, ny) and the triangle's extent [lo, hi] along it
+        let axes: Vec<(f64, f64, f64, f64)> = (0..3)
+            .map(|k| {
+                let (a, b, c) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+                let (nx, ny) = (a.1 - b.1, b.0 - a.0);
+                let (pa, pc) = (nx * a.0 + ny * a.1, nx * c.0 + ny * c.1);
+                (nx, ny, pa.min(pc), pa.max(pc))
+            })
+            .collect();
         for r in r0..=r1 {
-            mask[r * w + c0..=r * w + c1]
-                .iter_mut()
-                .for_each(|m| *m = true);
+            for c in c0..=c1 {
+                let (cx, cy) = (c as f64 + 0.5, r as f64 + 0.5);
+                if cx + half < x0 || cx - half > x1 || cy + half < y0 || cy - half > y1 {
+                    continue;
+                }
+                let apart = axes.iter().any(|&(nx, ny, lo, hi)| {
+                    let centre = nx * cx + ny * cy;
+                    let reach = half * (nx.abs() + ny.abs());
+                    centre + reach < lo || centre - reach > hi
+                });
+                if !apart {
+                    mask[r * w + c] = true;
+                }
+            }
         }
     }
     mask

@@ -3,7 +3,8 @@
 
 use super::*;
 
-/// The paths of the pixels `rows` of one attitude: their image rows, profile and totals.
+/// The paths of the pixels `rows` of one attitude (`counts.rx` per pixel): their image
+/// rows, profile and totals.
 // (the loop over orders indexes the pixel's sums and also picks the random numbers and the
 // strategies by order)
 #[allow(clippy::needless_range_loop)]
@@ -13,12 +14,11 @@ pub(super) fn render_rows(
     brdf: &(impl PathBrdf + ?Sized),
     rows: std::ops::Range<usize>,
     outputs: Outputs,
-    mask: &[bool],
+    counts: &Counts,
     mirrors: &Mirrors,
 ) -> PathSums {
     let (w, ch, orders) = (setup.width, setup.ch, setup.orders);
     let nb = setup.lay.n_bins;
-    let paths = setup.sensor.paths;
     let mut out = PathSums {
         image: vec![
             0.0;
@@ -32,14 +32,15 @@ pub(super) fn render_rows(
         total: vec![0.0; orders * ch],
     };
     let ext = setup.lay.ext;
-    let n = paths.samples;
     let (wi, wo) = (setup.wi, setup.wo);
     for row in rows.clone() {
         for col in 0..w {
             let pixel = (row * w + col) as u32;
             let mut px = vec![[0.0f64; 16]; orders];
-            let rng = PixelRng::new(paths.seed, pixel);
-            let n = if mask[pixel as usize] { n } else { 0 };
+            let rng = PixelRng::new(setup.seed, pixel);
+            let n = counts.rx[pixel as usize] as usize;
+            let n_rx = n as f64;
+            let weight = setup.area / n_rx;
             for i in 0..n {
                 let (x, y) = setup.point_in_pixel(row, col, rng.set(i, 0));
                 let Some(v1) = posed.trace(V3::new(x, y, 2.0 * ext), -V3::Z) else {
@@ -83,7 +84,7 @@ pub(super) fn render_rows(
                             let m = chain(&t, x_t, &m, x_m, w_out);
                             let prof = setup.order_profile(&mut out.profile, order);
                             let r = 0.5 * (length + r3);
-                            setup.add_path(&mut px[order], prof, &m, x_in, x_out1, r);
+                            setup.add_path(&mut px[order], prof, &m, x_in, x_out1, r, weight);
                         }
                     }
                     let [u1, u2, u_lobe] = rng.set(i, 1 + order as u32);
@@ -120,8 +121,10 @@ pub(super) fn render_rows(
                         let ci = dot(next.n, wi);
                         // a 2-bounce path is also drawn from the transmitter's side
                         let mis = if order == 0 && setup.strategies.transmitter {
-                            let a = dot(v.ng, wo).abs() * p * dot(next.ng, back).abs();
-                            let b = lobe_density(brdf, &next, wi, back) * dot(v.ng, w_next).abs();
+                            let a = n_rx * dot(v.ng, wo).abs() * p * dot(next.ng, back).abs();
+                            let b = counts.tx_at(setup, next.p)
+                                * lobe_density(brdf, &next, wi, back)
+                                * dot(v.ng, w_next).abs();
                             if a > 0.0 {
                                 a / (a + b)
                             } else {
@@ -138,7 +141,7 @@ pub(super) fn render_rows(
                         let m = chain(&t, x_t, &gm, g.x_out, back);
                         let prof = setup.order_profile(&mut out.profile, order);
                         let r = 0.5 * (length - dot(next.p, wi));
-                        setup.add_path(&mut px[order], prof, &m, g.x_in, x_out1, r);
+                        setup.add_path(&mut px[order], prof, &m, g.x_in, x_out1, r, weight);
                     }
                     if dot(next.n, back) <= 0.0 {
                         break;

@@ -9,6 +9,7 @@ use crate::brdf::MaterialSpec;
 use crate::optics::fresnel::Eta;
 use crate::render::geometry::rot_from_rows;
 use crate::render::test_scenes::lambert_sensor;
+use allocate::Counts;
 use std::f64::consts::FRAC_1_SQRT_2;
 
 /// Two `side x side` square plates sharing an edge along the body `y` axis through the
@@ -550,4 +551,152 @@ fn paths_memory_is_estimated_and_checked() {
     assert!(e.contains("bounces") && e.contains("GiB"), "{e}");
     s.paths.bounces = 1;
     assert_eq!(paths_bytes(&mesh, &s, 100_000, ALL), 0);
+}
+
+/// `covered_pixels` marks the pixel of every point of every triangle (random triangles and
+/// points, some crossing the image's edges), and a long thin triangle across the image
+/// only the pixels along it (not its bounding box).
+#[test]
+fn covered_pixels_hold_their_triangles_and_follow_thin_ones() {
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rand = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (w, ext) = (32, 1.0);
+    let pix = 2.0 * ext / w as f64;
+    for _ in 0..200 {
+        let c = V3::new(2.4 * rand() - 1.2, 2.4 * rand() - 1.2, rand());
+        let s = 0.5 * rand() * rand();
+        let tri = [0, 1, 2].map(|_| c + s * V3::new(rand() - 0.5, rand() - 0.5, rand() - 0.5));
+        let mask = covered_pixels(&[tri], V3::X, V3::Y, w, ext);
+        for _ in 0..200 {
+            let (mut a, mut b) = (rand(), rand());
+            if a + b > 1.0 {
+                (a, b) = (1.0 - a, 1.0 - b);
+            }
+            let p = tri[0] + a * (tri[1] - tri[0]) + b * (tri[2] - tri[0]);
+            let (col, row) = (((p.x + ext) / pix).floor(), ((ext - p.y) / pix).floor());
+            if col < 0.0 || row < 0.0 || col >= w as f64 || row >= w as f64 {
+                continue;
+            }
+            assert!(
+                mask[row as usize * w + col as usize],
+                "{tri:?}: {p:?} not covered"
+            );
+        }
+    }
+    // a wire 0.01 pixel wide across 28.8 x 23.5 pixels: it crosses about 53 of them, and
+    // its box holds 29 x 24
+    let d = 0.01 * pix;
+    let tri = [
+        V3::new(-0.9, -0.87, 0.0),
+        V3::new(0.9, 0.6, 0.0),
+        V3::new(0.9 - d, 0.6 + d, 0.0),
+    ];
+    let n = covered_pixels(&[tri], V3::X, V3::Y, w, ext)
+        .iter()
+        .filter(|&&m| m)
+        .count();
+    assert!(
+        (52..=70).contains(&n),
+        "{n} pixels for a wire across about 53"
+    );
+}
+
+/// The balance heuristic with each strategy's own count per pixel: paths shared unevenly
+/// (the receiver's 2x in a third of its pixels and 1/4 elsewhere, the transmitter's 2x in
+/// even rows and 1/2 in odd ones) still give the Lambertian dihedral's 2-bounce return
+/// (the view-factor formula of the test above) within 4 standard errors of 4 seeds.
+#[test]
+fn uneven_path_counts_keep_the_estimate_unbiased() {
+    let (side, rho, t) = (0.3, 0.8, 20f64.to_radians());
+    let mesh = dihedral(side);
+    let f = view_factor_perpendicular(1.0, 1.0, 1.0);
+    let (ca, cb) = ((0.25 * PI - t).sin(), (0.25 * PI + t).sin());
+    let want = 8.0 * rho * rho * side * side * f * ca * cb;
+    let open = open_sides(&mesh);
+    let bvh = posed::mesh_bvh(&mesh);
+    let rot = view(t, 0.3);
+    let posed = Posed::new(&mesh, &rot, &open, &bvh);
+    let mirrors = Mirrors::none(mesh.faces.len());
+    let got: Vec<f64> = (0..4)
+        .map(|seed| {
+            let sensor = sensor_with(48, 2, 128, seed);
+            let setup = Setup::new(&mesh, &sensor, Strategies::default());
+            let base = Counts::new(&setup, &posed, 128, true);
+            let counts = Counts {
+                rx: (base.rx.iter().enumerate())
+                    .map(|(k, &c)| if k % 3 == 0 { 2 * c } else { c / 4 })
+                    .collect(),
+                tx: (base.tx.iter().enumerate())
+                    .map(|(k, &c)| if (k / 48) % 2 == 0 { 2 * c } else { c / 2 })
+                    .collect(),
+            };
+            assert!(counts.rx.iter().any(|&c| c == 256) && counts.tx.iter().any(|&c| c == 64));
+            trace(&setup, &posed, &Lambert(rho), ALL, &counts, &mirrors).total[0]
+        })
+        .collect();
+    let mean = got.iter().sum::<f64>() / 4.0;
+    let var = got.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 3.0;
+    let se = (var / 4.0).sqrt();
+    assert!(se < 0.01 * want, "standard error {se} of {want}");
+    assert!(
+        (mean - want).abs() < 4.0 * se + 1e-4 * want,
+        "{mean} (+- {se}) vs {want}: {got:?}"
+    );
+}
+
+/// A closed mesh with a corner in a few pixels (a small box on a big one): the paths go to
+/// the pixels of faces with some of the mesh in front (the big box's top, the small box's
+/// sides), `N M / M_open` each (to the nearest power of two), and none to the pixels of
+/// the others alone.
+#[test]
+fn paths_go_to_the_pixels_of_open_faces() {
+    let cuboid = |lo: [f64; 3], hi: [f64; 3], first: u32| {
+        let v: Vec<[f64; 3]> = (0..8)
+            .map(|k| [0, 1, 2].map(|d| if (k >> d) & 1 == 1 { hi[d] } else { lo[d] }))
+            .collect();
+        // outward windings of the six faces (corners indexed by bits x, y, z)
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let f: Vec<[u32; 3]> = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .map(|t| t.map(|i| i + first))
+            .collect();
+        (v, f)
+    };
+    let (mut v, mut f) = cuboid([-1.0, -1.0, -1.0], [1.0, 1.0, 0.0], 0);
+    let (v2, f2) = cuboid([-0.2, -0.2, 0.0], [0.2, 0.2, 0.4], 8);
+    v.extend(v2);
+    f.extend(f2);
+    let n_f = f.len();
+    let mesh = Mesh::new(v, f, None, vec![0; n_f], 1).unwrap();
+    assert!(mesh.closed);
+    let open = open_sides(&mesh);
+    let bvh = posed::mesh_bvh(&mesh);
+    // mostly the big box's closed side x = 1, and the small box's closed top
+    let rot = view(1.2, 0.3);
+    let posed = Posed::new(&mesh, &rot, &open, &bvh);
+    let sensor = sensor_with(64, 2, 16, 0);
+    let setup = Setup::new(&mesh, &sensor, Strategies::default());
+    let counts = Counts::new(&setup, &posed, 16, true);
+    let all = covered_pixels(&posed.tris, V3::X, V3::Y, 64, setup.lay.ext);
+    let m = all.iter().filter(|&&x| x).count();
+    let m_open = counts.rx.iter().filter(|&&c| c > 0).count();
+    assert!(m_open > 0 && 2 * m_open < m, "{m_open} of {m} pixels");
+    let each = 16 << (m as f64 / m_open as f64).log2().round() as u32;
+    assert!(counts.rx.iter().all(|&c| c == 0 || c == each), "{each}");
+    assert!(counts.rx.iter().zip(&all).all(|(&c, &a)| a || c == 0));
+    // monostatic: the transmitter's view is the receiver's
+    assert_eq!(counts.rx, counts.tx);
 }

@@ -26,25 +26,25 @@ pub(super) fn render_tx_rows(
     brdf: &(impl PathBrdf + ?Sized),
     rows: std::ops::Range<usize>,
     outputs: Outputs,
-    mask: &[bool],
+    counts: &Counts,
 ) -> TxSums {
     let (w, ch, nb) = (setup.width, setup.ch, setup.lay.n_bins);
-    let paths = setup.sensor.paths;
     let mut out = TxSums {
         splats: Vec::new(),
         profile: vec![0.0; if outputs.profile { nb * ch } else { 0 }],
         total: vec![0.0; ch],
     };
     let ext = setup.lay.ext;
-    let n = paths.samples;
     let (wi, wo) = (setup.wi, setup.wo);
-    let seed = hash32(paths.seed ^ TX_SALT);
+    let seed = hash32(setup.seed ^ TX_SALT);
     for row in rows {
         for col in 0..w {
             let pixel = (row * w + col) as u32;
-            if !mask[pixel as usize] {
+            let n = counts.tx[pixel as usize] as usize;
+            if n == 0 {
                 continue;
             }
+            let n_tx = n as f64;
             let rng = PixelRng::new(seed, pixel);
             for i in 0..n {
                 let (x, y) = setup.point_in_pixel(row, col, rng.set(i, 0));
@@ -82,9 +82,10 @@ pub(super) fn render_tx_rows(
                 if !(pc >= 0.0 && pr >= 0.0 && pc < w as f64 && pr < w as f64) {
                     continue;
                 }
-                let b = dot(v2.ng, wi).abs() * p2 * dot(v1.ng, w1).abs();
+                let b = n_tx * dot(v2.ng, wi).abs() * p2 * dot(v1.ng, w1).abs();
                 let mis = if setup.strategies.receiver {
-                    let a = lobe_density(brdf, &v1, wo, w1) * dot(v2.ng, w2).abs();
+                    let n_rx = counts.rx_at(pr as usize * w + pc as usize);
+                    let a = n_rx * lobe_density(brdf, &v1, wo, w1) * dot(v2.ng, w2).abs();
                     b / (a + b)
                 } else {
                     1.0
@@ -96,7 +97,8 @@ pub(super) fn render_tx_rows(
                 // (n2.wi)(n1.w1) |ng2.w2| |ng1.wo| / (|ng1.w1| |ng2.wi| pdf2)
                 let g = c2 * dot(v1.n, w1) * dot(v2.ng, w2).abs() * dot(v1.ng, wo).abs()
                     / (dot(v1.ng, w1).abs() * dot(v2.ng, wi).abs() * p2);
-                let vals = setup.channels(&m, f2.x_in, f1.x_out, setup.weight * g * mis);
+                let weight = setup.area / n_tx;
+                let vals = setup.channels(&m, f2.x_in, f1.x_out, weight * g * mis);
                 if !vals.iter().all(|x| x.is_finite()) {
                     continue;
                 }
