@@ -231,14 +231,12 @@ pub(super) fn covered_pixels(tris: &[[V3; 3]], u: V3, v: V3, w: usize, ext: f64)
         let r0 = (y0 - 1.0).floor().clamp(0.0, last) as usize;
         let r1 = (y1 + 1.0).floor().clamp(0.0, last) as usize;
         // each edge's normal (nx, ny) and the triangle's extent [lo, hi] along it
-        let axes: Vec<(f64, f64, f64, f64)> = (0..3)
-            .map(|k| {
-                let (a, b, c) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
-                let (nx, ny) = (a.1 - b.1, b.0 - a.0);
-                let (pa, pc) = (nx * a.0 + ny * a.1, nx * c.0 + ny * c.1);
-                (nx, ny, pa.min(pc), pa.max(pc))
-            })
-            .collect();
+        let axes: [(f64, f64, f64, f64); 3] = std::array::from_fn(|k| {
+            let (a, b, c) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+            let (nx, ny) = (a.1 - b.1, b.0 - a.0);
+            let (pa, pc) = (nx * a.0 + ny * a.1, nx * c.0 + ny * c.1);
+            (nx, ny, pa.min(pc), pa.max(pc))
+        });
         for r in r0..=r1 {
             for c in c0..=c1 {
                 let (cx, cy) = (c as f64 + 0.5, r as f64 + 0.5);

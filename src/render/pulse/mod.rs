@@ -241,6 +241,56 @@ pub fn norm_pdf(x: f64) -> f64 {
     norm_pdf_t(x)
 }
 
+/// The standard normal CDF by cubic Hermite interpolation (the density as its derivative)
+/// between nodes `1 / per_sigma` apart on `[-half, half]`, and [`norm_cdf`] beyond: for
+/// the many evaluations of one render at points along the same Gaussian (the paths'
+/// deposits). The interpolation's error is at most `h^4 max|phi''''| / 384` (`h` the node
+/// spacing in standard deviations, `max|phi''''| = 3`, phi the density): 1.8e-12 at 256
+/// nodes per standard deviation; measured against [`norm_cdf`], 3.3e-13 (the test asserts
+/// < 2e-12).
+#[derive(Debug, Clone)]
+pub struct NormCdfTable {
+    half: f64,
+    per_sigma: f64,
+    /// Per node: the CDF and the density times the spacing.
+    nodes: Vec<[f64; 2]>,
+}
+
+impl NormCdfTable {
+    pub fn new(half: f64, per_sigma: usize) -> Self {
+        let n = (2.0 * half * per_sigma as f64).ceil() as usize;
+        let h = 1.0 / per_sigma as f64;
+        let nodes = (0..=n)
+            .map(|j| {
+                let y = -half + j as f64 * h;
+                [norm_cdf(y), norm_pdf(y) * h]
+            })
+            .collect();
+        NormCdfTable {
+            half,
+            per_sigma: per_sigma as f64,
+            nodes,
+        }
+    }
+
+    /// `Phi(y)`.
+    #[inline]
+    pub fn eval(&self, y: f64) -> f64 {
+        let t = (y + self.half) * self.per_sigma;
+        let j = t.floor();
+        if !(j >= 0.0 && (j as usize) + 1 < self.nodes.len()) {
+            return norm_cdf(y);
+        }
+        let u = t - j;
+        let ([p0, d0], [p1, d1]) = (self.nodes[j as usize], self.nodes[j as usize + 1]);
+        let (u2, u3) = (u * u, u * u * u);
+        p0 * (2.0 * u3 - 3.0 * u2 + 1.0)
+            + d0 * (u3 - 2.0 * u2 + u)
+            + p1 * (3.0 * u2 - 2.0 * u3)
+            + d1 * (u3 - u2)
+    }
+}
+
 /// Standard normal CDF in f32 from [`erfc_f32`].
 pub fn norm_cdf_f32(x: f32) -> f32 {
     norm_cdf_t(x)
