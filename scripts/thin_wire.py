@@ -5,8 +5,10 @@ side-on with its axis at 0 to 90 deg (5 deg steps) to the image rows, rendered a
 ``"balanced"`` preset (161 pixels across, 8 samples per pixel, pixel ~3.7 mm). The facet
 sum is ``4 pi f(wo, wo) cos^2(theta) A`` over the facets turned toward the sensor (all
 fully visible on a convex prism). Prints one line per angle: the relative error of
-``balanced``, of 16 samples per pixel, of ``coverage="analytic"`` and of one sample per
-pixel (``"fast"``'s sampling); then the render benchmark's CubeSat's cost at 1, 8 and 16
+``balanced``, of 16 samples per pixel, of ``coverage="analytic"`` (also with the wire in
+an open mesh, beside a triangle edge-on to the sensor: the wire's back faces stay out of
+the clipping since its own component is closed) and of one sample per pixel (``"fast"``'s
+sampling); then the render benchmark's CubeSat's cost at 1, 8 and 16
 samples per pixel (:func:`cubesat_cost`); ``--write`` also writes both to
 docs/thin-parts.md.
 
@@ -58,9 +60,14 @@ def facet_sum(mesh: trimesh.Trimesh, mat: pprender.Material, rot: np.ndarray) ->
     return total
 
 
-def errors(radius: float, lidar: pprender.Lidar, degrees: np.ndarray) -> np.ndarray:
-    """Relative error of the total cross-section at each angle."""
+def errors(radius: float, lidar: pprender.Lidar, degrees: np.ndarray, open_mesh: bool = False) -> np.ndarray:
+    """Relative error of the total cross-section at each angle. ``open_mesh``: the wire with
+    a small open triangle beside it, edge-on to the sensor at every attitude (it adds
+    nothing and hides nothing), so that the mesh is not closed while the wire is."""
     mesh = trimesh.creation.cylinder(radius=radius, height=0.6, sections=16)
+    if open_mesh:
+        sheet = trimesh.Trimesh([[0.0, 0.02, 0.0], [0.01, 0.02, 0.0], [0.0, 0.02, 0.01]], [[0, 1, 2]])
+        mesh = trimesh.util.concatenate([mesh, sheet])
     mat = materials.get("aluminium", alpha=0.3)
     scene = pprender.Scene(mesh, mat)
     rots = np.stack([attitude(math.radians(d)) for d in degrees])
@@ -104,6 +111,8 @@ def main(argv: list[str]) -> None:
             "1 mm balanced": errors(0.0005, pprender.Lidar(), degrees),
             "3 mm, 16 samples": errors(0.0015, pprender.Lidar(pixel_samples=16), degrees),
             "3 mm analytic": errors(0.0015, pprender.Lidar(coverage="analytic"), degrees),
+            "3 mm analytic, open mesh": errors(0.0015, pprender.Lidar(coverage="analytic"), degrees,
+                                               open_mesh=True),
             "3 mm, 1 sample": errors(0.0015, pprender.Lidar(pixel_samples=1), degrees)}
     lines = ["# Thin parts: a wire against the sum over its facets", "",
              "Written by `python scripts/thin_wire.py --write` (its docstring: the scene, and how thin "

@@ -130,7 +130,8 @@ struct Part {
 // (mesh adjacency, after the normals in `geometry`) of every seed and of every other
 // candidate that overlaps the pixel, not of the listed ones (at most MAX_QUEUE examined;
 // so the triangles of a surface that hold no sample are found through the ones that do);
-// back faces are skipped on closed meshes (the raster culls them). Each candidate
+// back faces of closed components are skipped (Mesh::face_closed; on closed meshes the
+// raster culls them). Each candidate
 // overlapping the pixel (at most MAX_CAND) is clipped to it; its visible part is that
 // clip minus every other candidate that overlaps it and is nearer at the centroid of
 // their overlap (ties: the lower id is nearer), kept as at most MAX_PIECES convex pieces.
@@ -165,7 +166,9 @@ fn coverage_parts(col: u32, row: u32, layer: u32, queue_in: array<u32, 64>, n_se
         let e2 = uv[2] - uv[0];
         let den = e1.x * e2.y - e1.y * e2.x;
         // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
-        var overlaps = den != 0.0 && !(params.closed != 0u && den > 0.0);
+        // (the back faces of closed components: Mesh::face_closed at the third corner)
+        let hidden_back = bitcast<u32>(geometry[3u * t + 2u].w) != 0u && den > 0.0;
+        var overlaps = den != 0.0 && !hidden_back;
         if (overlaps) {
             overlaps = moments(clip_triangle(unit_square(), uv, sign(den))).x > AREA_EPS;
         }

@@ -19,6 +19,9 @@ pub struct Mesh {
     /// outward normals ([`is_closed_outward`]): the nearest surface along any outside ray
     /// is then a front face, and the raster passes cull back faces.
     pub closed: bool,
+    /// Per face, whether its component is closed and outward-wound
+    /// ([`closed_components`]): its back faces are never seen, in a closed mesh or not.
+    pub face_closed: Vec<bool>,
     /// [`Mesh::adjacency`], computed on first use.
     adjacency: std::sync::OnceLock<Vec<[u32; 3]>>,
     /// [`Mesh::surfaces`], computed on first use.
@@ -31,21 +34,15 @@ pub struct Mesh {
 /// signed volume. Meshes with duplicated (unwelded) vertices, open parts or inconsistent
 /// winding return false (and are rendered without culling).
 pub fn is_closed_outward(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> bool {
+    closed_components(vertices, faces).iter().all(|&c| c)
+}
+
+/// Per face, whether its connected component (faces joined through shared vertices) is a
+/// closed, outward-wound surface ([`is_closed_outward`]'s test on that component alone):
+/// its back faces are then hidden from any viewpoint outside it, whatever the rest of the
+/// mesh is (a closed wire in an otherwise open mesh).
+pub fn closed_components(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> Vec<bool> {
     use std::collections::HashMap;
-    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(3 * faces.len());
-    for f in faces {
-        for k in 0..3 {
-            let e = (f[k], f[(k + 1) % 3]);
-            let c = edges.entry(e).or_insert(0);
-            *c += 1;
-            if *c > 1 {
-                return false;
-            }
-        }
-    }
-    if edges.keys().any(|&(a, b)| !edges.contains_key(&(b, a))) {
-        return false;
-    }
     // components by union-find over vertices
     let mut parent: Vec<u32> = (0..vertices.len() as u32).collect();
     fn find(p: &mut [u32], mut x: u32) -> u32 {
@@ -62,13 +59,31 @@ pub fn is_closed_outward(vertices: &[[f64; 3]], faces: &[[u32; 3]]) -> bool {
             parent[r as usize] = r0;
         }
     }
-    let mut volume: HashMap<u32, f64> = HashMap::new();
-    for f in faces {
-        let [a, b, c] = f.map(|k| V3::from(vertices[k as usize]));
-        let v = a.dot(b.cross(c));
-        *volume.entry(find(&mut parent, f[0])).or_insert(0.0) += v / 6.0;
+    let root: Vec<u32> = faces.iter().map(|f| find(&mut parent, f[0])).collect();
+    // per component: its signed volume and whether its edges pair up
+    let mut ok: HashMap<u32, bool> = HashMap::new();
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(3 * faces.len());
+    for (f, &r) in faces.iter().zip(&root) {
+        ok.entry(r).or_insert(true);
+        for k in 0..3 {
+            let c = edges.entry((f[k], f[(k + 1) % 3])).or_insert(0);
+            *c += 1;
+            if *c > 1 {
+                ok.insert(r, false);
+            }
+        }
     }
-    volume.values().all(|&v| v > 0.0)
+    for &(a, b) in edges.keys() {
+        if !edges.contains_key(&(b, a)) {
+            ok.insert(find(&mut parent, a), false);
+        }
+    }
+    let mut volume: HashMap<u32, f64> = HashMap::new();
+    for (f, &r) in faces.iter().zip(&root) {
+        let [a, b, c] = f.map(|k| V3::from(vertices[k as usize]));
+        *volume.entry(r).or_insert(0.0) += a.dot(b.cross(c)) / 6.0;
+    }
+    root.iter().map(|r| ok[r] && volume[r] > 0.0).collect()
 }
 
 /// Relative area (to the squared bounding radius) below which a triangle is degenerate.
@@ -170,7 +185,8 @@ impl Mesh {
                 ));
             }
         }
-        let closed = is_closed_outward(&vertices, &faces);
+        let face_closed = closed_components(&vertices, &faces);
+        let closed = face_closed.iter().all(|&c| c);
         Ok(Mesh {
             vertices,
             faces,
@@ -178,6 +194,7 @@ impl Mesh {
             face_material,
             radius,
             closed,
+            face_closed,
             adjacency: std::sync::OnceLock::new(),
             surfaces: std::sync::OnceLock::new(),
         })
@@ -254,7 +271,10 @@ impl Mesh {
                 while let Some(t) = stack.pop() {
                     for &u in &adj[t] {
                         let u = u as usize;
-                        if u == u32::MAX as usize || seen[u] || self.face_material[u] != self.face_material[root] {
+                        if u == u32::MAX as usize
+                            || seen[u]
+                            || self.face_material[u] != self.face_material[root]
+                        {
                             continue;
                         }
                         let Some(n) = normals[u] else {
@@ -298,16 +318,19 @@ impl Mesh {
     }
 
     /// The de-indexed GPU geometry: `3 T` corners `(x, y, z, w)`, `w` the bits of the
-    /// face's material at its first corner and of its surface ([`Mesh::surfaces`]) at its
-    /// second, then, with normals, `3 T` corner normals `(nx, ny, nz, 0)`.
+    /// face's material at its first corner, of its surface ([`Mesh::surfaces`]) at its
+    /// second and of [`Mesh::face_closed`] (1 or 0) at its third, then, with normals, `3 T`
+    /// corner normals `(nx, ny, nz, 0)`.
     pub fn gpu_geometry(&self) -> Vec<[f32; 4]> {
         let t = self.faces.len();
         let mut out = Vec::with_capacity(if self.normals.is_some() { 6 * t } else { 3 * t });
         let surf = self.surfaces();
-        for ((f, &m), &s) in self.faces.iter().zip(&self.face_material).zip(surf) {
+        for (((f, &m), &s), &fc) in
+            (self.faces.iter().zip(&self.face_material).zip(surf)).zip(&self.face_closed)
+        {
             for (c, &k) in f.iter().enumerate() {
                 let v = self.vertices[k as usize];
-                let w = if c == 1 { s } else { m };
+                let w = [m, s, fc as u32][c];
                 out.push([v[0] as f32, v[1] as f32, v[2] as f32, f32::from_bits(w)]);
             }
         }
@@ -644,5 +667,29 @@ mod tests {
             .collect();
         assert!(!is_closed_outward(&vs, &fs));
         assert!(Mesh::new(v, f, None, vec![0; 12], 1).unwrap().closed);
+    }
+
+    /// Per component: a closed cube beside an open one (a face missing) and an inside-out
+    /// one; the cube's faces alone are flagged closed, and the mesh as a whole is not.
+    #[test]
+    fn closed_components_are_flagged_per_face() {
+        let (mut v, mut f) = cube([0.0; 3], 0);
+        let (v2, f2) = cube([3.0, 0.0, 0.0], 8);
+        v.extend(v2);
+        f.extend_from_slice(&f2[1..]);
+        let (v3, mut f3) = cube([-3.0, 0.0, 0.0], 16);
+        for t in &mut f3 {
+            t.swap(1, 2);
+        }
+        v.extend(v3);
+        f.extend(f3);
+        let flags = closed_components(&v, &f);
+        assert_eq!(flags.len(), 12 + 11 + 12);
+        assert!(flags[..12].iter().all(|&c| c));
+        assert!(flags[12..].iter().all(|&c| !c));
+        let n = f.len();
+        let mesh = Mesh::new(v, f, None, vec![0; n], 1).unwrap();
+        assert!(!mesh.closed);
+        assert_eq!(mesh.face_closed, flags);
     }
 }

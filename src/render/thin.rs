@@ -17,9 +17,11 @@
 //!   [`crate::render::cpu::coverage_parts`]).
 //! - Where the clipping overflows its capacities, the pixel's samples (or centre) as
 //!   before: rarely with `K > 1` ([`crate::render::cpu::coverage::THIN_CAPACITY`]); with
-//!   analytic coverage wherever more than 32 triangles overlap a pixel (a 16-sided
-//!   cylinder thinner than a pixel in an open mesh lists its back faces too). One sample
-//!   per pixel (`"fast"`) is left as it is.
+//!   analytic coverage wherever more than 32 triangles overlap a pixel (a fan's apex). The
+//!   back faces of closed components ([`crate::render::geometry::Mesh::face_closed`]) are
+//!   left out of the lists and the clipping, in open meshes too (a 16-sided wire in an
+//!   open mesh listed its back faces and overflowed). One sample per pixel (`"fast"`) is
+//!   left as it is.
 //!
 //! Which faces are thin is decided per face and attitude from a vector computed once per
 //! mesh ([`face_thinness`]), `(a_x, a_y, a_z, s)` in the body frame (m):
@@ -162,7 +164,7 @@ impl ThinPixels {
             let den = (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
                 - (uv[1][1] - uv[0][1]) * (uv[2][0] - uv[0][0]);
             // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
-            if !den.is_finite() || den == 0.0 || (mesh.closed && den > 0.0) {
+            if !den.is_finite() || den == 0.0 || (mesh.face_closed[t] && den > 0.0) {
                 continue;
             }
             let (v_lo, v_hi) = uv

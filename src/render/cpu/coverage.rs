@@ -219,7 +219,7 @@ pub(crate) fn moments(p: &Poly) -> [f64; 3] {
 /// skipped) and, breadth first, the faces across the edges ([`Mesh::adjacency`]) of every
 /// seed and of every other candidate that overlaps the pixel, not of the listed ones (their
 /// neighbours are listed where thin, found from the seeds where not; at most `cap.queue`
-/// examined; back faces skipped on closed meshes);
+/// examined; back faces of closed components skipped, [`Mesh::face_closed`]);
 /// those overlapping the pixel (at most `cap.cand`) are clipped to it; a visible part is
 /// the clip minus every other candidate that overlaps it and is nearer at the centroid of
 /// their overlap (ties: the lower index), at most `cap.pieces` convex pieces kept. `None`
@@ -263,7 +263,7 @@ pub fn coverage_parts(
         let e2 = [uv[2][0] - uv[0][0], uv[2][1] - uv[0][1]];
         let den = e1[0] * e2[1] - e1[1] * e2[0];
         // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
-        let mut overlaps = den != 0.0 && !(mesh.closed && den > 0.0);
+        let mut overlaps = den != 0.0 && !(mesh.face_closed[t] && den > 0.0);
         if overlaps {
             overlaps = moments(&clip_triangle(&unit_square(), &uv, den.signum()))[0] > AREA_EPS;
         }

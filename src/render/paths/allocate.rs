@@ -11,10 +11,11 @@
 //! pixel of the mesh. The power of two keeps a pixel's count, and so its random numbers,
 //! the same while the attitude moves a little (a fit's steps), except where `M / M_open`
 //! crosses a power of `sqrt(2)` between them (the Sobol' points are also best balanced at
-//! powers of two). Each
-//! pixel's estimate is unbiased for any count: its `n` paths carry `1 / n` of its area
-//! each, and the balance heuristic weighs a path by each strategy's count where it was
-//! drawn (a strategy drawing `n` paths in a pixel has `n` times the density there).
+//! powers of two). Each pixel's estimate is unbiased for any count: its `n` paths carry
+//! `1 / n` of its area each, and the balance heuristic weighs a path by each strategy's
+//! count where it was drawn (a strategy drawing `n` paths in a pixel has `n` times the
+//! density there). Faces of closed components ([`Mesh::face_closed`]) start paths from
+//! their outward sides only.
 
 use super::*;
 
@@ -67,17 +68,14 @@ fn counts_toward(
     n: usize,
 ) -> Vec<u32> {
     let all = covered_pixels(&posed.tris, u, v, w, ext);
-    let closed = posed.mesh.closed;
-    let open_tris: Vec<[V3; 3]> = posed
-        .tris
-        .iter()
-        .zip(posed.open)
-        .filter(|([a, b, c], open)| {
-            // the side facing the view (a closed mesh shows only its outward sides)
+    let open_tris: Vec<[V3; 3]> = (posed.tris.iter().zip(posed.open))
+        .zip(&posed.mesh.face_closed)
+        .filter(|(([a, b, c], open), &closed)| {
+            // the side facing the view (a closed component shows only its outward sides)
             let toward = dot(cross(*b - *a, *c - *a), w_view);
             (toward > 0.0 && open[0]) || (toward < 0.0 && open[1] && !closed)
         })
-        .map(|(t, _)| *t)
+        .map(|((t, _), _)| *t)
         .collect();
     let open = covered_pixels(&open_tris, u, v, w, ext);
     let m = all.iter().filter(|&&x| x).count();

@@ -5,19 +5,19 @@
 use super::*;
 
 /// Whether no ray leaving the mesh's visible side can meet it again, from its faces'
-/// [`open_sides`]: a closed mesh (only the outward sides are seen) with nothing in front of
-/// any face (convex), or an open one with nothing on either side of any face (flat).
+/// [`open_sides`]: nothing in front of the outward side of any face of a closed component
+/// (convex) nor on either side of any other face (flat).
 pub fn has_no_interreflections(mesh: &Mesh) -> bool {
     no_interreflections(mesh, &open_sides(mesh))
 }
 
-/// [`has_no_interreflections`] from the mesh's [`open_sides`].
+/// [`has_no_interreflections`] from the mesh's [`open_sides`]: no face has anything in
+/// front of a side that can be seen (the outward side of a face of a closed component,
+/// [`Mesh::face_closed`]; either side of the others).
 pub(super) fn no_interreflections(mesh: &Mesh, open: &[[bool; 2]]) -> bool {
-    if mesh.closed {
-        open.iter().all(|s| !s[0])
-    } else {
-        open.iter().all(|s| !s[0] && !s[1])
-    }
+    open.iter()
+        .zip(&mesh.face_closed)
+        .all(|(s, &closed)| !s[0] && (closed || !s[1]))
 }
 
 /// For each face, whether any vertex of the mesh lies in front of its plane (`[0]`, the side
