@@ -33,10 +33,13 @@ impl Counts {
     pub(super) fn new(setup: &Setup<'_>, posed: &Posed<'_>, n: usize, transmitter: bool) -> Self {
         let (w, ext) = (setup.width, setup.lay.ext);
         let rx = counts_toward(posed, setup.wo, V3::X, V3::Y, w, ext, n);
-        let tx = if transmitter {
-            counts_toward(posed, setup.wi, setup.tx_u, setup.tx_v, w, ext, n)
-        } else {
+        let tx = if !transmitter {
             vec![0; w * w]
+        } else if (setup.wi, setup.tx_u, setup.tx_v) == (setup.wo, V3::X, V3::Y) {
+            // monostatic: the transmitter's view is the receiver's
+            rx.clone()
+        } else {
+            counts_toward(posed, setup.wi, setup.tx_u, setup.tx_v, w, ext, n)
         };
         Counts { rx, tx }
     }

@@ -169,8 +169,6 @@ struct Setup<'a> {
     gauss_cdf: Option<pulse::NormCdfTable>,
     /// A pixel's `4 pi delta^2`: each of its `n` paths carries `1 / n` of it.
     area: f64,
-    /// The seed of the receiver's strategy (the transmitter's is salted from it).
-    seed: u32,
     strategies: Strategies,
     /// The transmitter's image plane: unit `tx_u`, `tx_v` normal to `wi` (`= X`, `Y`
     /// monostatic), spanning the same square as the receiver's.
@@ -242,10 +240,30 @@ impl<'a> Setup<'a> {
                 .is_none()
                 .then(|| pulse::NormCdfTable::new(super::api::PULSE_SUPPORT_SIGMAS + 0.5, 256)),
             area: 4.0 * PI * pix * pix,
-            seed: sensor.paths.seed,
             strategies,
             tx_u: normalize(cross(V3::Y, wi)),
             tx_v: cross(wi, normalize(cross(V3::Y, wi))),
+        }
+    }
+
+    /// Zero sums of `n_rows` image rows (all orders), the profile and the totals, each
+    /// where `outputs` keep it.
+    fn zero_sums(&self, outputs: Outputs, n_rows: usize) -> PathSums {
+        let (w, ch, orders) = (self.width, self.ch, self.orders);
+        let image = if outputs.image {
+            orders * n_rows * w * ch
+        } else {
+            0
+        };
+        let profile = if outputs.profile {
+            orders * self.lay.n_bins * ch
+        } else {
+            0
+        };
+        PathSums {
+            image: vec![0.0; image],
+            profile: vec![0.0; profile],
+            total: vec![0.0; orders * ch],
         }
     }
 
@@ -379,7 +397,7 @@ pub fn render_paths_with(
     strategies: Strategies,
 ) -> Result<Vec<PathSums>> {
     let setup = Setup::new(mesh, sensor, strategies);
-    let (lay, orders, wi) = (setup.lay, setup.orders, setup.wi);
+    let (orders, wi) = (setup.orders, setup.wi);
     let w = setup.width;
     let open = if orders == 0 {
         Vec::new()
@@ -394,23 +412,10 @@ pub fn render_paths_with(
     };
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cancelled = std::sync::atomic::AtomicBool::new(false);
-    let (ch, nb) = (setup.ch, lay.n_bins);
     let one = |rot: &Rot| -> PathSums {
         use std::sync::atomic::Ordering::Relaxed;
-        let sums = PathSums {
-            image: vec![
-                0.0;
-                if outputs.image {
-                    orders * w * w * ch
-                } else {
-                    0
-                }
-            ],
-            profile: vec![0.0; if outputs.profile { orders * nb * ch } else { 0 }],
-            total: vec![0.0; orders * ch],
-        };
         if skip || cancelled.load(Relaxed) {
-            return sums;
+            return setup.zero_sums(outputs, w);
         }
         let posed = Posed::new(mesh, rot, &open, &bvh);
         let mirrors = if strategies.aim && orders >= 2 {
@@ -445,19 +450,7 @@ fn trace(
     mirrors: &Mirrors,
 ) -> PathSums {
     let (w, ch, orders) = (setup.width, setup.ch, setup.orders);
-    let nb = setup.lay.n_bins;
-    let mut sums = PathSums {
-        image: vec![
-            0.0;
-            if outputs.image {
-                orders * w * w * ch
-            } else {
-                0
-            }
-        ],
-        profile: vec![0.0; if outputs.profile { orders * nb * ch } else { 0 }],
-        total: vec![0.0; orders * ch],
-    };
+    let mut sums = setup.zero_sums(outputs, w);
     let blocks: Vec<std::ops::Range<usize>> = (0..w)
         .step_by(ROWS_PER_BLOCK)
         .map(|r| r..(r + ROWS_PER_BLOCK).min(w))

@@ -107,34 +107,27 @@ pub(super) struct Posed<'a> {
     pub(super) eps: f64,
 }
 
-/// The [`Bvh`] of `mesh` in its own frame, shared by every attitude's [`Posed`].
-pub(super) fn mesh_bvh(mesh: &Mesh) -> Bvh {
-    let vs: Vec<V3> = mesh.vertices.iter().map(|&v| V3::from(v)).collect();
-    let tris: Vec<[V3; 3]> = mesh
-        .faces
+/// The mesh's triangles with each vertex mapped by `at` (a rotation, or none).
+fn triangles(mesh: &Mesh, at: impl Fn(V3) -> V3) -> Vec<[V3; 3]> {
+    let vs: Vec<V3> = mesh.vertices.iter().map(|&v| at(V3::from(v))).collect();
+    mesh.faces
         .iter()
         .map(|f| f.map(|k| vs[k as usize]))
-        .collect();
-    Bvh::new(&tris)
+        .collect()
+}
+
+/// The [`Bvh`] of `mesh` in its own frame, shared by every attitude's [`Posed`].
+pub(super) fn mesh_bvh(mesh: &Mesh) -> Bvh {
+    Bvh::new(&triangles(mesh, |v| v))
 }
 
 impl<'a> Posed<'a> {
     pub(super) fn new(mesh: &'a Mesh, rot: &'a Rot, open: &'a [[bool; 2]], bvh: &'a Bvh) -> Self {
-        let vs: Vec<V3> = mesh
-            .vertices
-            .iter()
-            .map(|&v| rotate(rot, V3::from(v)))
-            .collect();
-        let tris: Vec<[V3; 3]> = mesh
-            .faces
-            .iter()
-            .map(|f| f.map(|k| vs[k as usize]))
-            .collect();
         Posed {
             mesh,
             rot,
             open,
-            tris,
+            tris: triangles(mesh, |v| rotate(rot, v)),
             bvh,
             to_mesh: rot.transpose(),
             eps: 1e-9 * mesh.radius,

@@ -18,26 +18,14 @@ pub(super) fn render_rows(
     mirrors: &Mirrors,
 ) -> PathSums {
     let (w, ch, orders) = (setup.width, setup.ch, setup.orders);
-    let nb = setup.lay.n_bins;
-    let mut out = PathSums {
-        image: vec![
-            0.0;
-            if outputs.image {
-                orders * rows.len() * w * ch
-            } else {
-                0
-            }
-        ],
-        profile: vec![0.0; if outputs.profile { orders * nb * ch } else { 0 }],
-        total: vec![0.0; orders * ch],
-    };
+    let mut out = setup.zero_sums(outputs, rows.len());
     let ext = setup.lay.ext;
     let (wi, wo) = (setup.wi, setup.wo);
     for row in rows.clone() {
         for col in 0..w {
             let pixel = (row * w + col) as u32;
             let mut px = vec![[0.0f64; 16]; orders];
-            let rng = PixelRng::new(setup.seed, pixel);
+            let rng = PixelRng::new(setup.sensor.paths.seed, pixel);
             let n = counts.rx[pixel as usize] as usize;
             let n_rx = n as f64;
             let weight = setup.area / n_rx;

@@ -89,6 +89,16 @@ fn sensor_with(res: usize, bounces: usize, samples: usize, seed: u32) -> SensorS
     s
 }
 
+/// Uniforms in `[0, 1)` from a xorshift64 stream seeded with `state` (test inputs).
+fn uniform_stream(mut state: u64) -> impl FnMut() -> f64 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 const ALL: Outputs = Outputs {
     image: true,
     range: false,
@@ -423,13 +433,7 @@ fn closed_sides_let_no_ray_meet_the_mesh() {
     );
     let sphere = crate::render::test_scenes::uv_sphere(0.5, 8, 16);
     assert!(open_sides(&sphere).iter().all(|s| !s[0] && s[1]));
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut rand = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rand = uniform_stream(0x2545_f491_4f6c_dd1d);
     for mesh in [dih, crate::render::test_scenes::sphere_and_plate()] {
         let open = open_sides(&mesh);
         let rot = Rot::IDENTITY;
@@ -558,13 +562,7 @@ fn paths_memory_is_estimated_and_checked() {
 /// only the pixels along it (not its bounding box).
 #[test]
 fn covered_pixels_hold_their_triangles_and_follow_thin_ones() {
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut rand = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rand = uniform_stream(0x9e37_79b9_7f4a_7c15);
     let (w, ext) = (32, 1.0);
     let pix = 2.0 * ext / w as f64;
     for _ in 0..200 {

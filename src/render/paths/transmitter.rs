@@ -36,7 +36,7 @@ pub(super) fn render_tx_rows(
     };
     let ext = setup.lay.ext;
     let (wi, wo) = (setup.wi, setup.wo);
-    let seed = hash32(setup.seed ^ TX_SALT);
+    let seed = hash32(setup.sensor.paths.seed ^ TX_SALT);
     for row in rows {
         for col in 0..w {
             let pixel = (row * w + col) as u32;
