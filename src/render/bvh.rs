@@ -12,8 +12,9 @@
 //! the permuted triangle list. Built top-down by the binned surface-area heuristic
 //! (`SAH_BINS` centroid bins per axis), at the median centroid along the longest axis
 //! where it cannot split or below depth `SAH_DEPTH` (so the depth stays under `SAH_DEPTH +
-//! log2(n / LEAF_SIZE)`, within the walk's stack of 96). Walks visit the nearer child first.
-//! The flat layout is what a GPU kernel can walk with a small stack.
+//! log2(n / LEAF_SIZE)`, within the fixed stack of the WGSL walk, `shaders/raycast.wgsl`;
+//! the CPU's grows as needed). Walks visit the nearer child first. The flat layout is what
+//! a GPU kernel can walk with a small stack.
 
 use crate::optics::frames::{cross, dot, V3};
 
@@ -246,58 +247,57 @@ impl Bvh {
             return;
         };
         // nodes to visit with where the ray enters their boxes: the nearer child on top
-        let mut stack = [(0u32, 0.0f64); 96];
-        stack[0] = (0, t_root);
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            let (idx, t_enter) = stack[top];
-            if t_enter > *t_far {
-                continue;
-            }
-            let n = self.nodes[idx as usize];
-            if n.count > 0 {
-                for k in n.first as usize..(n.first + n.count) as usize {
-                    if skip == Some(self.order[k]) {
-                        continue;
-                    }
-                    if let Some((t, u, v)) = intersect(o, d, &self.tris[k], t_min, *t_far) {
-                        *t_far = t;
-                        if on_hit(k, t, u, v) {
-                            return;
+        // (the thread's stack, reused: a fresh array per ray cost its zeroing, 5% of a
+        // 2-bounce render)
+        STACK.with_borrow_mut(|stack| {
+            stack.clear();
+            stack.push((0u32, t_root));
+            while let Some((idx, t_enter)) = stack.pop() {
+                if t_enter > *t_far {
+                    continue;
+                }
+                let n = self.nodes[idx as usize];
+                if n.count > 0 {
+                    for k in n.first as usize..(n.first + n.count) as usize {
+                        if skip == Some(self.order[k]) {
+                            continue;
+                        }
+                        if let Some((t, u, v)) = intersect(o, d, &self.tris[k], t_min, *t_far) {
+                            *t_far = t;
+                            if on_hit(k, t, u, v) {
+                                return;
+                            }
                         }
                     }
-                }
-            } else {
-                let (l, r) = (idx + 1, n.first);
-                let enter = |c: u32| {
-                    let b = &self.nodes[c as usize];
-                    box_entry(o, inv_d, b.lo, b.hi, t_min, *t_far)
-                };
-                match (enter(l), enter(r)) {
-                    (Some(tl), Some(tr)) => {
-                        let (near, far) = if tl <= tr {
-                            ((l, tl), (r, tr))
-                        } else {
-                            ((r, tr), (l, tl))
-                        };
-                        stack[top] = far;
-                        stack[top + 1] = near;
-                        top += 2;
+                } else {
+                    let (l, r) = (idx + 1, n.first);
+                    let enter = |c: u32| {
+                        let b = &self.nodes[c as usize];
+                        box_entry(o, inv_d, b.lo, b.hi, t_min, *t_far)
+                    };
+                    match (enter(l), enter(r)) {
+                        (Some(tl), Some(tr)) => {
+                            let (near, far) = if tl <= tr {
+                                ((l, tl), (r, tr))
+                            } else {
+                                ((r, tr), (l, tl))
+                            };
+                            stack.push(far);
+                            stack.push(near);
+                        }
+                        (Some(tl), None) => stack.push((l, tl)),
+                        (None, Some(tr)) => stack.push((r, tr)),
+                        (None, None) => {}
                     }
-                    (Some(tl), None) => {
-                        stack[top] = (l, tl);
-                        top += 1;
-                    }
-                    (None, Some(tr)) => {
-                        stack[top] = (r, tr);
-                        top += 1;
-                    }
-                    (None, None) => {}
                 }
             }
-        }
+        })
     }
+}
+
+thread_local! {
+    /// Each thread's walk stack ([`Bvh::walk_filtered`]; a walk's `on_hit` must not walk).
+    static STACK: std::cell::RefCell<Vec<(u32, f64)>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Bins per axis of the surface-area heuristic ([`build`]).
