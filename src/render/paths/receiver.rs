@@ -90,6 +90,15 @@ pub(super) fn render_rows(
                     let Some(next) = posed.trace(v.p + posed.eps * v.ng, w_next) else {
                         break;
                     };
+                    // next-event: `next` lit by the transmitter, seen from `v` along -w_next
+                    let back = -w_next;
+                    let drawn = order > 0 || setup.strategies.receiver;
+                    let facing = dot(next.n, back) > 0.0;
+                    let lit = drawn && facing && posed.sees(&next, wi);
+                    if order + 1 == orders && !lit {
+                        // (the last order: nothing more from this path, nor its BRDF)
+                        break;
+                    }
                     let f = brdf.eval(v.mat, v.n, w_next, w_out);
                     let fm = scale(&f.m, dot(v.n, w_next) / p);
                     if order == 0 {
@@ -101,10 +110,7 @@ pub(super) fn render_rows(
                     }
                     x_t = f.x_in;
                     length += dot(next.p - v.p, next.p - v.p).sqrt();
-                    // next-event: `next` lit by the transmitter, seen from `v` along -w_next
-                    let back = -w_next;
-                    let drawn = order > 0 || setup.strategies.receiver;
-                    if drawn && dot(next.n, back) > 0.0 && posed.sees(&next, wi) {
+                    if lit {
                         let g = brdf.eval(next.mat, next.n, wi, back);
                         let ci = dot(next.n, wi);
                         // a 2-bounce path is also drawn from the transmitter's side
@@ -131,7 +137,7 @@ pub(super) fn render_rows(
                         let r = 0.5 * (length - dot(next.p, wi));
                         setup.add_path(&mut px[order], prof, &m, g.x_in, x_out1, r, weight);
                     }
-                    if dot(next.n, back) <= 0.0 {
+                    if !facing {
                         break;
                     }
                     v = next;
