@@ -4,18 +4,28 @@
 //! strategy) or the transmitter (the transmitter's) has some of the mesh in front of it
 //! ([`open_sides`]); elsewhere it would leave the mesh at once. So each strategy draws only
 //! in the pixels such faces may cover ([`covered_pixels`]), and the render's budget, `N`
-//! paths for every pixel the mesh may cover, is shared evenly among those: `N M / M_open`
-//! each (`M` pixels the mesh may cover, `M_open` of them with open faces), rounded to `N`
-//! times a power of two. A satellite whose corners fill a few pixels then draws its paths
-//! there (the CubeSat's antenna against its bus), with about the work of `N` paths per
-//! pixel of the mesh. The power of two keeps a pixel's count, and so its random numbers,
-//! the same while the attitude moves a little (a fit's steps), except where `M / M_open`
-//! crosses a power of `sqrt(2)` between them (the Sobol' points are also best balanced at
-//! powers of two). Each pixel's estimate is unbiased for any count: its `n` paths carry
-//! `1 / n` of its area each, and the balance heuristic weighs a path by each strategy's
-//! count where it was drawn (a strategy drawing `n` paths in a pixel has `n` times the
-//! density there). Faces of closed components ([`Mesh::face_closed`]) start paths from
-//! their outward sides only.
+//! paths for every pixel the mesh may cover, is shared among those. A satellite whose
+//! corners fill a few pixels then draws its paths there (the CubeSat's antenna against its
+//! bus), with about the work of `N` paths per pixel of the mesh.
+//!
+//! Pixels where an open face is thin in that view (narrower than [`THIN_PX`] pixels in
+//! projection, [`crate::render::thin`]: a wire, a panel's rim seen edge-on) weigh
+//! [`THIN_WEIGHT`] times as much as the others: within such a pixel the surface's normal
+//! sweeps around a wire, and only a sliver of it turns the light into the rest of the mesh
+//! (the CubeSat's 3 mm whip against its bus held most of the noise of the views where it
+//! shows; `scripts/interreflections.py`, section 3). A pixel of weight `w` gets
+//! `N w M / W` paths (`M` the pixels the mesh may cover, `W` the sum of the open pixels'
+//! weights), rounded to `N` times a power of two (at least `N`, at most
+//! [`MAX_PATH_SAMPLES`]).
+//!
+//! The power of two keeps a pixel's count, and so its random numbers, the same while the
+//! attitude moves a little (a fit's steps), except where `w M / W` crosses a power of
+//! `sqrt(2)` or a face turns thin (the Sobol' points are also best balanced at powers of
+//! two). Each pixel's estimate is unbiased for any count: its `n` paths carry `1 / n` of
+//! its area each, and the balance heuristic weighs a path by each strategy's count where
+//! it was drawn (a strategy drawing `n` paths in a pixel has `n` times the density there).
+//! Faces of closed components ([`Mesh::face_closed`]) start paths from their outward sides
+//! only.
 
 use super::*;
 
@@ -32,14 +42,14 @@ impl Counts {
     /// cover on average (module docs); no transmitter paths without `transmitter`.
     pub(super) fn new(setup: &Setup<'_>, posed: &Posed<'_>, n: usize, transmitter: bool) -> Self {
         let (w, ext) = (setup.width, setup.lay.ext);
-        let rx = counts_toward(posed, setup.wo, V3::X, V3::Y, w, ext, n);
+        let rx = counts_toward(setup, posed, setup.wo, V3::X, V3::Y, w, ext, n);
         let tx = if !transmitter {
             vec![0; w * w]
-        } else if (setup.wi, setup.tx_u, setup.tx_v) == (setup.wo, V3::X, V3::Y) {
+        } else if setup.monostatic() {
             // monostatic: the transmitter's view is the receiver's
             rx.clone()
         } else {
-            counts_toward(posed, setup.wi, setup.tx_u, setup.tx_v, w, ext, n)
+            counts_toward(setup, posed, setup.wi, setup.tx_u, setup.tx_v, w, ext, n)
         };
         Counts { rx, tx }
     }
@@ -57,11 +67,17 @@ impl Counts {
     }
 }
 
-/// The counts of one strategy: `N 2^k` paths (`2^k` the power of two nearest
-/// `M / M_open`, at least 1; at most [`MAX_PATH_SAMPLES`]) in each of the `M_open` pixels
-/// of the `w x w` view along `w_view` (axes `u`, `v`) that the faces open toward it may
-/// cover, `M` the pixels any face may cover.
+/// How much more a pixel with a thin open face weighs in the share of the paths (module
+/// docs; 8 gave the least profile noise per cost on the CubeSat among 1, 4, 8, 16, 32 and
+/// 64).
+pub(super) const THIN_WEIGHT: f64 = 8.0;
+
+/// The counts of one strategy in the `w x w` view along `w_view` (axes `u`, `v`): in each
+/// pixel that faces open toward the view may cover, `N 2^k` paths, `2^k` the power of two
+/// nearest `w M / W` (module docs), at least 1; at most [`MAX_PATH_SAMPLES`].
+#[allow(clippy::too_many_arguments)]
 fn counts_toward(
+    setup: &Setup<'_>,
     posed: &Posed<'_>,
     w_view: V3,
     u: V3,
@@ -71,24 +87,45 @@ fn counts_toward(
     n: usize,
 ) -> Vec<u32> {
     let all = covered_pixels(&posed.tris, u, v, w, ext);
-    let open_tris: Vec<[V3; 3]> = (posed.tris.iter().zip(posed.open))
-        .zip(&posed.mesh.face_closed)
-        .filter(|(([a, b, c], open), &closed)| {
-            // the side facing the view (a closed component shows only its outward sides)
-            let toward = dot(cross(*b - *a, *c - *a), w_view);
-            (toward > 0.0 && open[0]) || (toward < 0.0 && open[1] && !closed)
-        })
-        .map(|((t, _), _)| *t)
-        .collect();
+    let mut open_tris: Vec<[V3; 3]> = Vec::new();
+    let mut thin_tris: Vec<[V3; 3]> = Vec::new();
+    let faces = posed
+        .tris
+        .iter()
+        .zip(posed.open)
+        .zip(&posed.mesh.face_closed);
+    for (((tri, open), &closed), a) in faces.zip(&setup.thinness) {
+        let [p0, p1, p2] = *tri;
+        // the side facing the view (a closed component shows only its outward sides)
+        let toward = dot(cross(p1 - p0, p2 - p0), w_view);
+        if (toward > 0.0 && open[0]) || (toward < 0.0 && open[1] && !closed) {
+            open_tris.push(*tri);
+            // `crate::render::thin::is_thin` along `w_view`
+            let width = dot(rotate(posed.rot, V3::new(a[0], a[1], a[2])), w_view).abs() + a[3];
+            if width < THIN_PX * setup.pix {
+                thin_tris.push(*tri);
+            }
+        }
+    }
     let open = covered_pixels(&open_tris, u, v, w, ext);
+    let thin = covered_pixels(&thin_tris, u, v, w, ext);
     let m = all.iter().filter(|&&x| x).count();
-    let m_open = open.iter().filter(|&&x| x).count();
-    if m_open == 0 {
+    let weight = |k: usize| match (open[k], thin[k]) {
+        (false, _) => 0.0,
+        (true, false) => 1.0,
+        (true, true) => THIN_WEIGHT,
+    };
+    let total: f64 = (0..w * w).map(weight).sum();
+    if total == 0.0 {
         return vec![0; w * w];
     }
-    let each =
-        (n << (m as f64 / m_open as f64).log2().round().max(0.0) as u32).min(MAX_PATH_SAMPLES);
-    open.iter()
-        .map(|&x| if x { each as u32 } else { 0 })
+    (0..w * w)
+        .map(|k| match weight(k) {
+            0.0 => 0,
+            x => {
+                let k = (m as f64 * x / total).log2().round().max(0.0) as u32;
+                (n << k).min(MAX_PATH_SAMPLES) as u32
+            }
+        })
         .collect()
 }

@@ -83,6 +83,7 @@ use super::bvh::Bvh;
 use super::cpu::{Brdf, Framed};
 use super::geometry::{rotate, Mesh, Rot};
 use super::pulse;
+use super::thin::{face_thinness, THIN_PX};
 use crate::brdf::spec::Term;
 use crate::brdf::terms::sum_terms_except;
 use crate::brdf::Material;
@@ -174,6 +175,8 @@ struct Setup<'a> {
     /// monostatic), spanning the same square as the receiver's.
     tx_u: V3,
     tx_v: V3,
+    /// Each face's [`face_thinness`] (which faces are thin at an attitude, `allocate.rs`).
+    thinness: Vec<[f64; 4]>,
 }
 
 /// Which sampling strategies draw the 2-bounce paths: from the receiver's side (a point of
@@ -243,6 +246,7 @@ impl<'a> Setup<'a> {
             strategies,
             tx_u: normalize(cross(V3::Y, wi)),
             tx_v: cross(wi, normalize(cross(V3::Y, wi))),
+            thinness: face_thinness(mesh),
         }
     }
 
@@ -334,6 +338,11 @@ impl<'a> Setup<'a> {
                 }
             }
         });
+    }
+
+    /// Whether the transmitter's view is the receiver's (`wi = wo`).
+    fn monostatic(&self) -> bool {
+        (self.wi, self.tx_u, self.tx_v) == (self.wo, V3::X, V3::Y)
     }
 
     /// The transmitter's pixel (row-major index) that the point `p` is lit in, if any.
