@@ -114,7 +114,7 @@ use receiver::render_rows;
 pub use rng::{hash32, uniforms, PixelRng, DIMS};
 #[cfg(test)]
 use rng::{sobol, sobol_directions};
-use transmitter::{render_tx_rows, TxSums};
+use transmitter::{add_tx_path, render_tx_rows, TxSums, TX_SALT};
 
 /// The Mueller matrix of `a` after `b` along a path, `a L b`: `b`'s output is the beam
 /// propagating along `k` in the basis `x_b`, `a`'s input the same beam in the basis `x_a`
@@ -340,6 +340,12 @@ impl<'a> Setup<'a> {
         });
     }
 
+    /// Whether the transmitter's strategy starts its paths from the receiver's points
+    /// (monostatic, `receiver.rs`) rather than in its own pass (`transmitter.rs`).
+    fn shares_points(&self) -> bool {
+        self.strategies.transmitter && self.monostatic()
+    }
+
     /// Whether the transmitter's view is the receiver's (`wi = wo`).
     fn monostatic(&self) -> bool {
         (self.wi, self.tx_u, self.tx_v) == (self.wo, V3::X, V3::Y)
@@ -459,16 +465,30 @@ fn trace(
     mirrors: &Mirrors,
 ) -> PathSums {
     let (w, ch, orders) = (setup.width, setup.ch, setup.orders);
+    // (monostatic, the transmitter's paths start from the receiver's points: its counts
+    // are the receiver's, as `Counts::new` gives them)
+    let same;
+    let counts = if setup.shares_points() && counts.tx != counts.rx {
+        same = Counts {
+            rx: counts.rx.clone(),
+            tx: counts.rx.clone(),
+        };
+        &same
+    } else {
+        counts
+    };
     let mut sums = setup.zero_sums(outputs, w);
     let blocks: Vec<std::ops::Range<usize>> = (0..w)
         .step_by(ROWS_PER_BLOCK)
         .map(|r| r..(r + ROWS_PER_BLOCK).min(w))
         .collect();
-    let parts: Vec<PathSums> = blocks
+    let parts: Vec<(PathSums, TxSums)> = blocks
         .par_iter()
         .map(|r| render_rows(setup, posed, brdf, r.clone(), outputs, counts, mirrors))
         .collect();
-    for (r, part) in blocks.iter().zip(parts) {
+    let mut tx_parts = Vec::with_capacity(blocks.len());
+    for (r, (part, tx_part)) in blocks.iter().zip(parts) {
+        tx_parts.push(tx_part);
         if outputs.image {
             let n_rows = r.len();
             for order in 0..orders {
@@ -485,10 +505,14 @@ fn trace(
         }
     }
     if setup.strategies.transmitter {
-        let parts: Vec<TxSums> = blocks
-            .par_iter()
-            .map(|r| render_tx_rows(setup, posed, brdf, r.clone(), outputs, counts))
-            .collect();
+        let parts: Vec<TxSums> = if setup.shares_points() {
+            tx_parts
+        } else {
+            blocks
+                .par_iter()
+                .map(|r| render_tx_rows(setup, posed, brdf, r.clone(), outputs, counts))
+                .collect()
+        };
         for part in parts {
             for (pixel, vals) in part.splats {
                 for (x, v) in sums.image[pixel * ch..(pixel + 1) * ch]

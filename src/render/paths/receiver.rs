@@ -1,10 +1,16 @@
 //! The paths drawn from the receiver's side: a point of the pixel, directions from each
 //! surface's lobes, next-event estimation toward the transmitter ([`render_rows`]).
+//!
+//! Monostatic, the transmitter's view, pixels and counts are the receiver's, and so is the
+//! first surface through a point of a pixel: the transmitter's strategy then starts its
+//! paths from the receiver's points ([`Setup::shares_points`]; their surfaces and lobes
+//! found once), each with its own direction (its own random numbers, as in its own pass).
 
 use super::*;
 
 /// The paths of the pixels `rows` of one attitude (`counts.rx` per pixel): their image
-/// rows, profile and totals.
+/// rows, profile and totals; monostatic, also the transmitter's strategy's paths from the
+/// same points (module docs).
 // (the loop over orders indexes the pixel's sums and also picks the random numbers and the
 // strategies by order)
 #[allow(clippy::needless_range_loop)]
@@ -16,9 +22,12 @@ pub(super) fn render_rows(
     outputs: Outputs,
     counts: &Counts,
     mirrors: &Mirrors,
-) -> PathSums {
+) -> (PathSums, TxSums) {
     let (w, ch, orders) = (setup.width, setup.ch, setup.orders);
     let mut out = setup.zero_sums(outputs, rows.len());
+    let mut tx_out = TxSums::new(setup, outputs);
+    let shared = setup.shares_points();
+    let tx_seed = hash32(setup.sensor.paths.seed ^ TX_SALT);
     let ext = setup.lay.ext;
     let (wi, wo) = (setup.wi, setup.wo);
     for row in rows.clone() {
@@ -26,6 +35,7 @@ pub(super) fn render_rows(
             let pixel = (row * w + col) as u32;
             let mut px = vec![[0.0f64; 16]; orders];
             let rng = PixelRng::new(setup.sensor.paths.seed, pixel);
+            let tx_rng = PixelRng::new(tx_seed, pixel);
             let n = counts.rx[pixel as usize] as usize;
             let n_rx = n as f64;
             let weight = setup.area / n_rx;
@@ -56,6 +66,22 @@ pub(super) fn render_rows(
                     let Some(lobes) = lobes_toward(brdf, &v, w_out) else {
                         break;
                     };
+                    if order == 0 && shared {
+                        // the transmitter's path from this point (lit, as it is seen)
+                        let (u, n_tx) = (tx_rng.set(i, 1), counts.tx[pixel as usize] as f64);
+                        add_tx_path(
+                            setup,
+                            posed,
+                            brdf,
+                            counts,
+                            &v,
+                            &lobes,
+                            u,
+                            n_tx,
+                            outputs,
+                            &mut tx_out,
+                        );
+                    }
                     if order == 1 && !mirrors.list.is_empty() {
                         // a 3-bounce path aimed from `v` at a mirror of the transmitter
                         let aimed = aim(
@@ -155,5 +181,5 @@ pub(super) fn render_rows(
             }
         }
     }
-    out
+    (out, tx_out)
 }

@@ -608,8 +608,9 @@ fn covered_pixels_hold_their_triangles_and_follow_thin_ones() {
 /// (the receiver's 2x in a third of its pixels and 1/4 elsewhere, the transmitter's 2x in
 /// even rows and 1/2 in odd ones) still give the Lambertian dihedral's 2-bounce return
 /// (the view-factor formula of the test above, each plate seen and the other lit) within
-/// 4 standard errors of 12 seeds, monostatic and 0.1 rad bistatic (the transmitter's
-/// pixels are then not the receiver's). (4 seeds were too few to estimate the error: their mean
+/// 4 standard errors of 12 seeds, monostatic (where the transmitter's paths start from
+/// the receiver's points, with its counts) and 0.1 rad bistatic (its own pixels and
+/// counts). (4 seeds were too few to estimate the error: their mean
 /// read +0.2% at 1.6 of their standard errors' 4, where 48 seeds read -0.08 +- 0.08%.)
 #[test]
 fn uneven_path_counts_keep_the_estimate_unbiased() {
