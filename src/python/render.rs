@@ -326,15 +326,14 @@ impl PyRenderScene {
         width: usize,
     ) -> PyResult<Bound<'py, numpy::PyArray3<bool>>> {
         use crate::render::cpu::thin_pixel_mask;
-        use crate::render::thin::face_thinness;
         if width == 0 {
             return Err(crate::Error::param("width", width, "a positive number of pixels").into());
         }
         let rots = attitudes(rotations)?;
-        let a = face_thinness(&self.mesh);
+        let a = crate::render::thin::mesh_thinness(&self.mesh);
         let masks: Vec<bool> = rots
             .iter()
-            .flat_map(|r| thin_pixel_mask(&self.mesh, &a, r, width))
+            .flat_map(|r| thin_pixel_mask(&self.mesh, a, r, width))
             .collect();
         Ok(Array3::from_shape_vec((rots.len(), width, width), masks)
             .expect("n x width x width values")

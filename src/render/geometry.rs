@@ -26,6 +26,12 @@ pub struct Mesh {
     adjacency: std::sync::OnceLock<Vec<[u32; 3]>>,
     /// [`Mesh::surfaces`], computed on first use.
     surfaces: std::sync::OnceLock<Vec<u32>>,
+    /// [`Mesh::bvh`], built on first use.
+    bvh: std::sync::OnceLock<super::bvh::Bvh>,
+    /// The faces' thinness, computed on first use (`thin::mesh_thinness`).
+    thinness: std::sync::OnceLock<Vec<[f64; 4]>>,
+    // (these caches, like the two above, hold for the mesh `Mesh::new` made: a mesh whose
+    // public fields are changed after it must be made anew)
 }
 
 /// Whether a triangle mesh is a union of closed, outward-wound surfaces: every directed
@@ -197,7 +203,27 @@ impl Mesh {
             face_closed,
             adjacency: std::sync::OnceLock::new(),
             surfaces: std::sync::OnceLock::new(),
+            bvh: std::sync::OnceLock::new(),
+            thinness: std::sync::OnceLock::new(),
         })
+    }
+
+    /// The ray-casting tree of the triangles in the body frame (the inter-reflections'
+    /// paths turn their rays into it), built on first use: a scene rendered again (a fit's
+    /// steps) does not build it again.
+    pub fn bvh(&self) -> &super::bvh::Bvh {
+        self.bvh.get_or_init(|| {
+            let tris: Vec<[V3; 3]> = (self.faces.iter())
+                .map(|f| f.map(|k| V3::from(self.vertices[k as usize])))
+                .collect();
+            super::bvh::Bvh::new(&tris)
+        })
+    }
+
+    /// The cache of the faces' thinness (`thin::mesh_thinness` fills it: this module does
+    /// not name that one, which names it).
+    pub(crate) fn thinness_cache(&self) -> &std::sync::OnceLock<Vec<[f64; 4]>> {
+        &self.thinness
     }
 
     /// For each face, the face across each of its edges (edge `k` joins corners `k` and

@@ -52,6 +52,12 @@ pub const THIN_PX: f64 = 1.0;
 /// A face that is never thin (degenerate surfaces).
 const NEVER: [f64; 4] = [0.0, 0.0, 0.0, 1e30];
 
+/// [`face_thinness`] of `mesh`, computed once per mesh and kept in it (a scene rendered
+/// again does not compute it again).
+pub fn mesh_thinness(mesh: &Mesh) -> &[[f64; 4]] {
+    mesh.thinness_cache().get_or_init(|| face_thinness(mesh))
+}
+
 /// Per face, `(a_x, a_y, a_z, s)` of the module's test (body frame, m).
 pub fn face_thinness(mesh: &Mesh) -> Vec<[f64; 4]> {
     let n_f = mesh.faces.len();

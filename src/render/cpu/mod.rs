@@ -43,7 +43,7 @@ pub use shadow::{shadowed, TransmitterView};
 
 use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
 use super::geometry::{Mesh, Rot};
-use super::thin::{face_thinness, ThinPixels};
+use super::thin::{mesh_thinness, ThinPixels};
 use crate::brdf::table::BrdfTable;
 use crate::optics::frames::{Frame, V3};
 use accumulate::{Accumulator, PixelAcc};
@@ -313,7 +313,7 @@ const THIN_BYTES: usize = 256 << 20;
 
 /// Whether each pixel of an image `width` pixels across (the renderer's framing, `[-ext,
 /// ext]` with `ext` the mesh's radius) has a thin face at attitude `rot` ([`ThinPixels`];
-/// `thinness` from [`face_thinness`]), row-major.
+/// `thinness` from [`mesh_thinness`]), row-major.
 pub fn thin_pixel_mask(mesh: &Mesh, thinness: &[[f64; 4]], rot: &Rot, width: usize) -> Vec<bool> {
     let ext = mesh.radius;
     let lay = Layout {
@@ -354,14 +354,13 @@ fn render_pixels(
     let beta = sensor.bistatic_angle;
     let beam = Beam::new(sensor, &lay);
     // thin parts take exact coverage with K > 1 samples and with analytic coverage
-    let thinness = (sensor.samples > 1 || sensor.analytic).then(|| face_thinness(mesh));
+    let thinness = (sensor.samples > 1 || sensor.analytic).then(|| mesh_thinness(mesh));
     // per attitude: the rotated vertices, the visibility samples' id maps (in parallel
     // when the attitudes are not), the transmitter's view (bistatic) and the pixels with
     // thin faces
     let prepare = |rot: &Rot, in_parallel: bool| {
         let vertices = rotate_vertices(mesh, rot);
         let thin = thinness
-            .as_deref()
             .map(|a| ThinPixels::new(mesh, a, rot, &vertices, &lay))
             .unwrap_or_default();
         if thin_only && thin.is_empty() {

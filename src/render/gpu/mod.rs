@@ -52,7 +52,7 @@ pub use readback::host_profile;
 
 use super::api::{Layout, Outputs, Progress, Rendered, SensorSetup};
 use super::geometry::{Mesh, Rot};
-use super::thin::{self, face_thinness};
+use super::thin;
 use crate::error::Result;
 use passes::{encode_chunk, shade_key, ChunkBindings, SceneBuffers};
 use plan::Plan;
@@ -167,14 +167,14 @@ fn render_chunks(
     let transmitter = key.shadows.then_some(sensor.bistatic_angle);
     let mut host = HostOutputs::new(outputs, n, sensor.resolution, plan.channels, lay.n_bins);
     // thin parts take exact coverage with K > 1 samples and with analytic coverage
-    let thinness = (sensor.samples > 1 || sensor.analytic).then(|| face_thinness(mesh));
+    let thinness = (sensor.samples > 1 || sensor.analytic).then(|| thin::mesh_thinness(mesh));
     let setup = t0.elapsed().as_secs_f64();
     let (mut encoding, mut waiting, mut reading) = (0.0, 0.0, 0.0);
     for start in (0..n).step_by(c) {
         let m = (n - start).min(c);
         let rots = &rotations[start..start + m];
         let t = Instant::now();
-        let thin_words = thin_words(mesh, thinness.as_deref(), rots, lay, gpu)?;
+        let thin_words = thin_words(mesh, thinness, rots, lay, gpu)?;
         let bindings = ChunkBindings::new(
             gpu,
             &scene,

@@ -98,7 +98,7 @@ fn counts_toward(
         .iter()
         .zip(posed.open)
         .zip(&posed.mesh.face_closed);
-    for (((tri, open), &closed), a) in faces.zip(&setup.thinness) {
+    for (((tri, open), &closed), a) in faces.zip(setup.thinness) {
         let [p0, p1, p2] = *tri;
         // the side facing the view (a closed component shows only its outward sides)
         let toward = dot(cross(p1 - p0, p2 - p0), w_view);

@@ -83,7 +83,7 @@ use super::bvh::Bvh;
 use super::cpu::{Brdf, Framed};
 use super::geometry::{rotate, Mesh, Rot};
 use super::pulse;
-use super::thin::{face_thinness, THIN_PX};
+use super::thin::{mesh_thinness, THIN_PX};
 use crate::brdf::spec::Term;
 use crate::brdf::terms::sum_terms_except;
 use crate::brdf::Material;
@@ -108,7 +108,7 @@ use allocate::Counts;
 pub use lobes::{lobes_from_weights, Lobes, Materials, PathBrdf, MIN_LOBE_P};
 use lobes::{lobes_toward, pdf, sample};
 use mirrors::{aim, Mirrors};
-use posed::{covered_pixels, mesh_bvh, no_interreflections, surface_areas, Posed, Vertex};
+use posed::{covered_pixels, no_interreflections, surface_areas, Posed, Vertex};
 pub use posed::{has_no_interreflections, open_sides};
 use receiver::render_rows;
 pub use rng::{hash32, uniforms, PixelRng, DIMS};
@@ -175,8 +175,8 @@ struct Setup<'a> {
     /// monostatic), spanning the same square as the receiver's.
     tx_u: V3,
     tx_v: V3,
-    /// Each face's [`face_thinness`] (which faces are thin at an attitude, `allocate.rs`).
-    thinness: Vec<[f64; 4]>,
+    /// Each face's [`mesh_thinness`] (which faces are thin at an attitude, `allocate.rs`).
+    thinness: &'a [[f64; 4]],
 }
 
 /// Which sampling strategies draw the 2-bounce paths: from the receiver's side (a point of
@@ -217,7 +217,7 @@ fn lobe_density(brdf: &(impl PathBrdf + ?Sized), v: &Vertex, w_out: V3, w: V3) -
 }
 
 impl<'a> Setup<'a> {
-    fn new(mesh: &Mesh, sensor: &'a SensorSetup, strategies: Strategies) -> Self {
+    fn new(mesh: &'a Mesh, sensor: &'a SensorSetup, strategies: Strategies) -> Self {
         let lay = Layout::new(mesh, sensor);
         let beta = sensor.bistatic_angle;
         let wi = V3::new(beta.sin(), 0.0, beta.cos());
@@ -246,7 +246,7 @@ impl<'a> Setup<'a> {
             strategies,
             tx_u: normalize(cross(V3::Y, wi)),
             tx_v: cross(wi, normalize(cross(V3::Y, wi))),
-            thinness: face_thinness(mesh),
+            thinness: mesh_thinness(mesh),
         }
     }
 
@@ -420,10 +420,12 @@ pub fn render_paths_with(
         open_sides(mesh)
     };
     let skip = orders == 0 || no_interreflections(mesh, &open);
+    let empty;
     let (areas, bvh) = if skip {
-        (Vec::new(), Bvh::new(&[]))
+        empty = Bvh::new(&[]);
+        (Vec::new(), &empty)
     } else {
-        (surface_areas(mesh), mesh_bvh(mesh))
+        (surface_areas(mesh), mesh.bvh())
     };
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cancelled = std::sync::atomic::AtomicBool::new(false);
@@ -432,7 +434,7 @@ pub fn render_paths_with(
         if skip || cancelled.load(Relaxed) {
             return setup.zero_sums(outputs, w);
         }
-        let posed = Posed::new(mesh, rot, &open, &bvh);
+        let posed = Posed::new(mesh, rot, &open, bvh);
         let mirrors = if strategies.aim && orders >= 2 {
             Mirrors::new(&posed, brdf, wi, &areas)
         } else {

@@ -99,7 +99,7 @@ pub(super) struct Posed<'a> {
     /// [`open_sides`] of the mesh.
     pub(super) open: &'a [[bool; 2]],
     pub(super) tris: Vec<[V3; 3]>,
-    /// The tree over the mesh's unrotated triangles ([`mesh_bvh`]).
+    /// The tree over the mesh's unrotated triangles ([`Mesh::bvh`]).
     pub(super) bvh: &'a Bvh,
     /// `R^T`: the telescope frame to the mesh's.
     to_mesh: Rot,
@@ -114,11 +114,6 @@ fn triangles(mesh: &Mesh, at: impl Fn(V3) -> V3) -> Vec<[V3; 3]> {
         .iter()
         .map(|f| f.map(|k| vs[k as usize]))
         .collect()
-}
-
-/// The [`Bvh`] of `mesh` in its own frame, shared by every attitude's [`Posed`].
-pub(super) fn mesh_bvh(mesh: &Mesh) -> Bvh {
-    Bvh::new(&triangles(mesh, |v| v))
 }
 
 impl<'a> Posed<'a> {

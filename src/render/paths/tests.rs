@@ -437,7 +437,7 @@ fn closed_sides_let_no_ray_meet_the_mesh() {
     for mesh in [dih, crate::render::test_scenes::sphere_and_plate()] {
         let open = open_sides(&mesh);
         let rot = Rot::IDENTITY;
-        let bvh = posed::mesh_bvh(&mesh);
+        let bvh = mesh.bvh();
         let posed = Posed::new(&mesh, &rot, &open, &bvh);
         let mut closed_checked = 0;
         for (t, tri) in posed.tris.iter().enumerate() {
@@ -618,7 +618,7 @@ fn uneven_path_counts_keep_the_estimate_unbiased() {
     let mesh = dihedral(side);
     let f = view_factor_perpendicular(1.0, 1.0, 1.0);
     let open = open_sides(&mesh);
-    let bvh = posed::mesh_bvh(&mesh);
+    let bvh = mesh.bvh();
     let rot = view(t, 0.3);
     let posed = Posed::new(&mesh, &rot, &open, &bvh);
     let mirrors = Mirrors::none(mesh.faces.len());
@@ -703,7 +703,7 @@ fn thin_parts_get_more_paths() {
     let n_f = f.len();
     let mesh = Mesh::new(v, f, None, vec![0; n_f], 1).unwrap();
     let open = open_sides(&mesh);
-    let bvh = posed::mesh_bvh(&mesh);
+    let bvh = mesh.bvh();
     let rot = view(0.6, 0.4);
     let posed = Posed::new(&mesh, &rot, &open, &bvh);
     let mut sensor = sensor_with(64, 2, 4, 0);
@@ -755,7 +755,7 @@ fn paths_go_to_the_pixels_of_open_faces() {
     let mesh = Mesh::new(v, f, None, vec![0; n_f], 1).unwrap();
     assert!(mesh.closed);
     let open = open_sides(&mesh);
-    let bvh = posed::mesh_bvh(&mesh);
+    let bvh = mesh.bvh();
     // mostly the big box's closed side x = 1, and the small box's closed top
     let rot = view(1.2, 0.3);
     let posed = Posed::new(&mesh, &rot, &open, &bvh);
