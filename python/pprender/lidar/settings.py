@@ -133,16 +133,17 @@ class Settings:
         Paths per pixel with ``bounces`` > 1, in [1, 65536], on average over the pixels the
         mesh may cover: they are drawn only in the pixels of surfaces that face another part
         of the mesh (the others have no inter-reflections), so a satellite whose corners fill
-        a few pixels draws many paths there. Given explicitly, it overrides the ``quality``
-        preset's (4, 16, 64, 256 for fast, balanced, accurate, reference). The noise falls
-        about as ``1 / sqrt(path_samples)``.
+        a few pixels draws many paths there; pixels of parts thinner than a pixel in the
+        view (a wire, a panel's rim seen edge-on) get 8 times as many, on top. Given
+        explicitly, it overrides the ``quality`` preset's (4, 16, 64, 256 for fast,
+        balanced, accurate, reference). The noise falls about as ``1 / sqrt(path_samples)``.
     path_seed : int, optional
         Seed of the paths' random numbers, in [0, 2**32 - 1] (default 0). They depend on the
         seed, the pixel and its number of paths only: the same seed gives the same bits, in
         a batch or one attitude at a time, and a fit sees common random numbers from step to
         step (a pixel's number of paths, ``path_samples`` times a power of two, changes only
         where the share of the mesh's pixels facing other parts crosses a power of
-        sqrt(2)).
+        sqrt(2), or where a part turns thinner or wider than a pixel).
 
     Raises
     ------
