@@ -58,6 +58,8 @@ pub(super) fn render_rows(
                 let mut x_out1 = V3::ZERO;
                 let mut length = -dot(v1.p, wo);
                 let (mut v, mut w_out) = (v1, wo);
+                let (mut t_next, mut x_t_next, mut length_next) = (t, x_t, length);
+                let mut v_next: Option<(Vertex, V3)> = None;
                 for order in 0..orders {
                     if !posed.side_open(&v) {
                         break;
@@ -82,92 +84,121 @@ pub(super) fn render_rows(
                             &mut tx_out,
                         );
                     }
-                    if order == 1 && !mirrors.list.is_empty() {
-                        // a 3-bounce path aimed from `v` at a mirror of the transmitter
-                        let aimed = aim(
-                            setup,
-                            posed,
-                            brdf,
-                            mirrors,
-                            &v,
-                            w_out,
-                            &lobes,
-                            rng.set(i, 3),
-                        );
-                        if let Some(((m, x_m), x_in, r3)) = aimed {
-                            let m = chain(&t, x_t, &m, x_m, w_out);
-                            let prof = setup.order_profile(&mut out.profile, order);
-                            let r = 0.5 * (length + r3);
-                            setup.add_path(&mut px[order], prof, &m, x_in, x_out1, r, weight);
+                    // from the second surface, `split` draws of the third bounce, each with
+                    // its share of the path (module docs of `super`); the state to go on from
+                    // after the first surface's draw
+                    let split = if order == 1 { setup.third_draws } else { 1 };
+                    let base_weight = weight;
+                    for k in 0..split {
+                        let weight = base_weight / split as f64;
+                        let j = i * split + k;
+                        let (mut t, mut x_t, mut length) = (t, x_t, length);
+                        'draw: {
+                            if order == 1 && !mirrors.list.is_empty() {
+                                // a 3-bounce path aimed from `v` at a mirror of the transmitter
+                                let aimed = aim(
+                                    setup,
+                                    posed,
+                                    brdf,
+                                    mirrors,
+                                    &v,
+                                    w_out,
+                                    &lobes,
+                                    rng.set(j, 3),
+                                );
+                                if let Some(((m, x_m), x_in, r3)) = aimed {
+                                    let m = chain(&t, x_t, &m, x_m, w_out);
+                                    let prof = setup.order_profile(&mut out.profile, order);
+                                    let r = 0.5 * (length + r3);
+                                    setup.add_path(
+                                        &mut px[order],
+                                        prof,
+                                        &m,
+                                        x_in,
+                                        x_out1,
+                                        r,
+                                        weight,
+                                    );
+                                }
+                            }
+                            let [u1, u2, u_lobe] = rng.set(j, 1 + order as u32);
+                            let Some(w_next) = sample(&lobes, v.n, w_out, [u_lobe, u1, u2]) else {
+                                break 'draw;
+                            };
+                            if dot(w_next, v.ng) <= 0.0 {
+                                break 'draw;
+                            }
+                            let p = pdf(&lobes, v.n, w_out, w_next);
+                            if p <= 0.0 || p.is_nan() {
+                                break 'draw;
+                            }
+                            // (traced first: most paths leave the mesh here, and cost no BRDF)
+                            let Some(next) = posed.trace(v.p + posed.eps * v.ng, w_next) else {
+                                break 'draw;
+                            };
+                            // next-event: `next` lit by the transmitter, seen from `v` along -w_next
+                            let back = -w_next;
+                            let drawn = order > 0 || setup.strategies.receiver;
+                            let facing = dot(next.n, back) > 0.0;
+                            let lit = drawn && facing && posed.sees(&next, wi);
+                            if order + 1 == orders && !lit {
+                                // (the last order: nothing more from this path, nor its BRDF)
+                                break 'draw;
+                            }
+                            let f = brdf.eval(v.mat, v.n, w_next, w_out);
+                            let fm = scale(&f.m, dot(v.n, w_next) / p);
+                            if order == 0 {
+                                t = fm;
+                                x_out1 = f.x_out;
+                            } else {
+                                // the beam v -> previous surface: in f's output basis, into t's input
+                                t = chain(&t, x_t, &fm, f.x_out, w_out);
+                            }
+                            x_t = f.x_in;
+                            length += dot(next.p - v.p, next.p - v.p).sqrt();
+                            if lit {
+                                let g = brdf.eval(next.mat, next.n, wi, back);
+                                let ci = dot(next.n, wi);
+                                // a 2-bounce path is also drawn from the transmitter's side
+                                let mis = if order == 0 && setup.strategies.transmitter {
+                                    let a =
+                                        n_rx * dot(v.ng, wo).abs() * p * dot(next.ng, back).abs();
+                                    let b = counts.tx_at(setup, next.p)
+                                        * lobe_density(brdf, &next, wi, back)
+                                        * dot(v.ng, w_next).abs();
+                                    if a > 0.0 {
+                                        a / (a + b)
+                                    } else {
+                                        0.0
+                                    }
+                                } else if order == 1 && setup.strategies.aim {
+                                    // a 3-bounce path is also aimed at a mirror from `v`
+                                    let b = mirrors.density(&next, w_next, wi);
+                                    p / (p + b)
+                                } else {
+                                    1.0
+                                };
+                                let gm = scale(&scale(&g.m, ci), mis);
+                                let m = chain(&t, x_t, &gm, g.x_out, back);
+                                let prof = setup.order_profile(&mut out.profile, order);
+                                let r = 0.5 * (length - dot(next.p, wi));
+                                setup.add_path(&mut px[order], prof, &m, g.x_in, x_out1, r, weight);
+                            }
+                            if !facing {
+                                break 'draw;
+                            }
+                            if order + 1 < orders {
+                                (t_next, x_t_next, length_next) = (t, x_t, length);
+                                v_next = Some((next, back));
+                            }
                         }
                     }
-                    let [u1, u2, u_lobe] = rng.set(i, 1 + order as u32);
-                    let Some(w_next) = sample(&lobes, v.n, w_out, [u_lobe, u1, u2]) else {
+                    let Some((nv, nw)) = v_next.take() else {
                         break;
                     };
-                    if dot(w_next, v.ng) <= 0.0 {
-                        break;
-                    }
-                    let p = pdf(&lobes, v.n, w_out, w_next);
-                    if p <= 0.0 || p.is_nan() {
-                        break;
-                    }
-                    // (traced first: most paths leave the mesh here, and cost no BRDF)
-                    let Some(next) = posed.trace(v.p + posed.eps * v.ng, w_next) else {
-                        break;
-                    };
-                    // next-event: `next` lit by the transmitter, seen from `v` along -w_next
-                    let back = -w_next;
-                    let drawn = order > 0 || setup.strategies.receiver;
-                    let facing = dot(next.n, back) > 0.0;
-                    let lit = drawn && facing && posed.sees(&next, wi);
-                    if order + 1 == orders && !lit {
-                        // (the last order: nothing more from this path, nor its BRDF)
-                        break;
-                    }
-                    let f = brdf.eval(v.mat, v.n, w_next, w_out);
-                    let fm = scale(&f.m, dot(v.n, w_next) / p);
-                    if order == 0 {
-                        t = fm;
-                        x_out1 = f.x_out;
-                    } else {
-                        // the beam v -> previous surface: in f's output basis, into t's input
-                        t = chain(&t, x_t, &fm, f.x_out, w_out);
-                    }
-                    x_t = f.x_in;
-                    length += dot(next.p - v.p, next.p - v.p).sqrt();
-                    if lit {
-                        let g = brdf.eval(next.mat, next.n, wi, back);
-                        let ci = dot(next.n, wi);
-                        // a 2-bounce path is also drawn from the transmitter's side
-                        let mis = if order == 0 && setup.strategies.transmitter {
-                            let a = n_rx * dot(v.ng, wo).abs() * p * dot(next.ng, back).abs();
-                            let b = counts.tx_at(setup, next.p)
-                                * lobe_density(brdf, &next, wi, back)
-                                * dot(v.ng, w_next).abs();
-                            if a > 0.0 {
-                                a / (a + b)
-                            } else {
-                                0.0
-                            }
-                        } else if order == 1 && setup.strategies.aim {
-                            // a 3-bounce path is also aimed at a mirror from `v`
-                            let b = mirrors.density(&next, w_next, wi);
-                            p / (p + b)
-                        } else {
-                            1.0
-                        };
-                        let gm = scale(&scale(&g.m, ci), mis);
-                        let m = chain(&t, x_t, &gm, g.x_out, back);
-                        let prof = setup.order_profile(&mut out.profile, order);
-                        let r = 0.5 * (length - dot(next.p, wi));
-                        setup.add_path(&mut px[order], prof, &m, g.x_in, x_out1, r, weight);
-                    }
-                    if !facing {
-                        break;
-                    }
-                    v = next;
-                    w_out = back;
+                    (t, x_t, length) = (t_next, x_t_next, length_next);
+                    v = nv;
+                    w_out = nw;
                 }
             }
             for (order, vals) in px.iter().enumerate() {
