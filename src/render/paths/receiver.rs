@@ -84,10 +84,16 @@ pub(super) fn render_rows(
                             &mut tx_out,
                         );
                     }
-                    // from the second surface, `split` draws of the third bounce, each with
-                    // its share of the path (module docs of `super`); the state to go on from
-                    // after the first surface's draw
-                    let split = if order == 1 { setup.third_draws } else { 1 };
+                    // The third bounce (order 1, the last: at most 3 bounces) is drawn
+                    // `third_draws` times from this second surface, each draw from a copy of
+                    // the path's state and with its share of the path (module docs of
+                    // `super`). After the first surface's one draw, its state is where the
+                    // path goes on from (`v_next`).
+                    let split = if order == 1 && order + 1 == orders {
+                        setup.third_draws
+                    } else {
+                        1
+                    };
                     let base_weight = weight;
                     for k in 0..split {
                         let weight = base_weight / split as f64;
