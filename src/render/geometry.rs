@@ -637,24 +637,7 @@ mod tests {
 
     /// A unit cube centred at `c`, outward-wound (counter-clockwise seen from outside).
     fn cube(c: [f64; 3], first: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-        let v = (0..8)
-            .map(|k| [0, 1, 2].map(|a| c[a] + if (k >> a) & 1 == 1 { 0.5 } else { -0.5 }))
-            .collect();
-        // quads (outward, counter-clockwise): -x, +x, -y, +y, -z, +z
-        let quads = [
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-        ];
-        let f = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .map(|t: [u32; 3]| t.map(|k| k + first))
-            .collect();
-        (v, f)
+        crate::render::test_scenes::cuboid(c.map(|x| x - 0.5), c.map(|x| x + 0.5), first)
     }
 
     #[test]

@@ -185,3 +185,25 @@ pub fn wire_view(phi: f64) -> Rot {
     let (c, s) = (phi.cos(), phi.sin());
     crate::render::geometry::rot_from_rows([[0.0, s, c], [0.0, -c, s], [1.0, 0.0, 0.0]])
 }
+
+/// The corners and outward triangles of the box `[lo, hi]`, vertex indices from `first`.
+pub fn cuboid(lo: [f64; 3], hi: [f64; 3], first: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    let v: Vec<[f64; 3]> = (0..8)
+        .map(|k| [0, 1, 2].map(|d| if (k >> d) & 1 == 1 { hi[d] } else { lo[d] }))
+        .collect();
+    // outward windings of the six faces (corners indexed by bits x, y, z)
+    let quads = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let f: Vec<[u32; 3]> = quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .map(|t| t.map(|i| i + first))
+        .collect();
+    (v, f)
+}

@@ -8,7 +8,7 @@ use crate::brdf::spec::Terms;
 use crate::brdf::MaterialSpec;
 use crate::optics::fresnel::Eta;
 use crate::render::geometry::rot_from_rows;
-use crate::render::test_scenes::lambert_sensor;
+use crate::render::test_scenes::{cuboid, lambert_sensor};
 use allocate::Counts;
 use std::f64::consts::FRAC_1_SQRT_2;
 
@@ -152,9 +152,8 @@ fn lambertian_dihedral_second_bounce_equals_the_view_factor_formula() {
                 s[0].total[0]
             })
             .collect();
-        let mean = got.iter().sum::<f64>() / 4.0;
-        let var = got.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 3.0;
-        let se = (var / 4.0).sqrt();
+        let (mean, sd) = mean_sd(&got);
+        let se = sd / 2.0;
         assert!(
             se < 0.01 * want,
             "{t_deg}, {st:?}: standard error {se} of {want}"
@@ -677,9 +676,8 @@ fn uneven_path_counts_keep_the_estimate_unbiased() {
             * side
             * f
             * (cos(n_a, wo) * cos(n_b, wi) + cos(n_b, wo) * cos(n_a, wi));
-        let mean = got.iter().sum::<f64>() / 12.0;
-        let var = got.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 11.0;
-        let se = (var / 12.0).sqrt();
+        let (mean, sd) = mean_sd(&got);
+        let se = sd / 12f64.sqrt();
         assert!(
             se < 0.01 * want,
             "beta {beta}: standard error {se} of {want}"
@@ -689,28 +687,6 @@ fn uneven_path_counts_keep_the_estimate_unbiased() {
             "beta {beta}: {mean} (+- {se}) vs {want}: {got:?}"
         );
     }
-}
-
-/// The corners and outward triangles of the box `[lo, hi]`, vertex indices from `first`.
-fn cuboid(lo: [f64; 3], hi: [f64; 3], first: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-    let v: Vec<[f64; 3]> = (0..8)
-        .map(|k| [0, 1, 2].map(|d| if (k >> d) & 1 == 1 { hi[d] } else { lo[d] }))
-        .collect();
-    // outward windings of the six faces (corners indexed by bits x, y, z)
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let f: Vec<[u32; 3]> = quads
-        .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .map(|t| t.map(|i| i + first))
-        .collect();
-    (v, f)
 }
 
 /// A thin square post (0.02 m wide, thinner than a pixel) standing on a box: the pixels
