@@ -30,7 +30,12 @@ of ``scripts/gpu_bundle.sh`` (no Rust, no Mitsuba, no registry), or directly::
 4. Where the time goes: each output alone and all together at one batch size, with the
    stages of the best call (``RenderResult.stage_seconds``: encoding, waiting for the
    device, reading back and decoding, conversion to NumPy).
-5. What the device time scales with: profile-only renders of SCALING_BATCH attitudes at
+5. Inter-reflections (skipped with ``--quick``): the render benchmark's table
+   (``benchmarks/bench_render.py``, ``interreflection_rows``) on this machine: bounces 1 to 3
+   at 4 and 16 paths per pixel, the first hits on the device and the paths on the CPU's
+   threads (no GPU kernel traces paths yet), beside the f64 CPU twin, with the profile noise
+   against a 1024-path reference.
+6. What the device time scales with: profile-only renders of SCALING_BATCH attitudes at
    several resolutions and triangle counts, the device's time per attitude from the
    stages. Time that stays put as pixels and triangles grow is per-attitude overhead
    (render passes, dispatches), not shading or rasterization.
@@ -53,7 +58,7 @@ import pprender
 from pprender import materials, models
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "benchmarks"))
-from bench_render import best_time, cubesat_scene, random_quaternions  # noqa: E402  (the render benchmark's)
+from bench_render import best_time, cubesat_scene, interreflection_rows, random_quaternions  # noqa: E402  (the render benchmark's)
 
 #: Largest allowed errors of the f32 kernel against the f64 twin (module docstring).
 LIMITS = {"total": 1e-2, "profile": 1e-2, "image_p99": 1e-3, "outliers": 2e-3}
@@ -243,7 +248,7 @@ def throughput(device: str, budget: float, once: dict[str, float]) -> list[dict[
 
 def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[str, Any]],
            parts: list[dict[str, Any]], scale: list[dict[str, Any]], once: dict[str, float], device: str,
-           seconds: float) -> str:
+           seconds: float, paths: list[str] | None = None) -> str:
     lines = ["# GPU check", ""]
     if info.get("device_type") == "Cpu":
         lines += [
@@ -304,6 +309,11 @@ def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[s
     for r in parts:
         lines.append(f"| {r['outputs']} | {r['rate']:.1f} | {1e3 * r['seconds']:.1f} | "
                      + " | ".join(f"{1e3 * r[k]:.1f}" for k in STAGES) + " |")
+    if paths:
+        lines += ["", "## Inter-reflections: the first hits on the device, the paths on the CPU", "",
+                  "The render benchmark's table (`benchmarks/bench_render.py`; its docstring says how the noise "
+                  f"is measured), run here on {os.cpu_count()} CPU threads.", ""]
+        lines += paths[:-1] if paths[-1] == "" else paths
     lines += [
         "",
         "## What the device time scales with: profile only (Stokes, H), "
@@ -352,7 +362,11 @@ def main(argv: list[str] | None = None) -> int:
     parts = breakdown(a.device, 4 if a.quick else BREAKDOWN_BATCH)
     print("scaling:", flush=True)
     scale = scaling(a.device, 4 if a.quick else SCALING_BATCH)
-    text = report(info, agree, speed, parts, scale, once, a.device, time.perf_counter() - t0)
+    paths = None
+    if not a.quick:
+        print("inter-reflections:", flush=True)
+        paths = interreflection_rows(a.device, 3)
+    text = report(info, agree, speed, parts, scale, once, a.device, time.perf_counter() - t0, paths)
     print(text)
     if a.write:
         with open(a.write, "w") as f:
