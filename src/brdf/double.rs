@@ -46,7 +46,7 @@
 
 use super::surface::Surface;
 use crate::optics::frames::{beam_bases, dot, facet_sp_basis, neg, normalize, reflect, Frame, V3};
-use crate::optics::fresnel::{fresnel_amplitudes, C64};
+use crate::optics::fresnel::{fresnel_amplitudes, Eta, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 use std::f64::consts::PI;
 
@@ -80,6 +80,19 @@ pub fn double_jones(
     h1: V3,
     frame: Frame,
 ) -> Option<(Jones, V3, V3)> {
+    double_jones_in(mat.spec.eta, wi, wo, h1, beam_bases(frame, wi, wo))
+}
+
+/// [`double_jones`] for index `eta` in the beam bases `(x_in, y_in, x_out, y_out)` (as
+/// [`beam_bases`] returns them; `x_in` and `x_out` also serve as the reference vector at
+/// normal incidence on a facet).
+pub fn double_jones_in(
+    eta: Eta,
+    wi: V3,
+    wo: V3,
+    h1: V3,
+    bases: (V3, V3, V3, V3),
+) -> Option<(Jones, V3, V3)> {
     let wi_h1 = dot(wi, h1);
     if wi_h1 <= 0.0 || h1[2] <= 0.0 {
         return None;
@@ -98,9 +111,9 @@ pub fn double_jones(
     if c2 <= 0.0 {
         return None;
     }
-    let (rs1, rp1) = fresnel_amplitudes(wi_h1.min(1.0), mat.spec.eta);
-    let (rs2, rp2) = fresnel_amplitudes(c2.min(1.0), mat.spec.eta);
-    let (x_in, y_in, x_out, y_out) = beam_bases(frame, wi, wo);
+    let (rs1, rp1) = fresnel_amplitudes(wi_h1.min(1.0), eta);
+    let (rs2, rp2) = fresnel_amplitudes(c2.min(1.0), eta);
+    let (x_in, y_in, x_out, y_out) = bases;
     let k_in = neg(wi);
     let mut j = [[C64::new(0.0, 0.0); 2]; 2];
     for (b, e_in) in [x_in, y_in].into_iter().enumerate() {

@@ -19,6 +19,7 @@
 //! terms) <- [`terms`] (their sum) <- [`table`] (the renderer's tables).
 
 pub mod albedo;
+pub mod bank;
 pub mod double;
 pub mod material;
 pub mod single;

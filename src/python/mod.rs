@@ -3,6 +3,7 @@
 use pyo3::prelude::*;
 
 mod args;
+mod bank;
 pub mod brdf;
 mod polarimetry;
 mod reference;
@@ -26,6 +27,7 @@ impl From<crate::Error> for PyErr {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("Error", m.py().get_type::<Error>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    bank::register(m)?;
     brdf::register(m)?;
     polarimetry::register(m)?;
     seed::register(m)?;

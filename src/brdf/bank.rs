@@ -1,0 +1,514 @@
+//! Order 2 of a Gaussian-correlated Beckmann surface from the surface's own paths (issue 24).
+//!
+//! # Why
+//! The double term ([`super::double`]) draws the second facet independently of the first.
+//! On a real rough surface the second facet is the far wall of the same valley (PHYSICS.md
+//! section 5b), which turns order 2 back toward the source: the double term is 0.29x the
+//! explicit surface at normal-incidence backscatter for alpha 0.5, 2-4x at 50 deg
+//! (`docs/microsurface-comparison.md`). The geometry of order-2 paths depends only on the
+//! surface class (alpha and the shape of the autocorrelation), not on the material, so
+//! it is traced once and each material's Fresnel and Jones matrices are applied per path.
+//!
+//! # The bank ([`PathBank`])
+//! Gaussian random surfaces with a Gaussian autocorrelation
+//! ([`crate::reference::microsurface::gaussian_height_field`]: triangulated, exactly
+//! Beckmann slopes), lit by a plane wave from `wi = (sin theta_i, 0, cos theta_i)` at the
+//! incidence nodes `theta_i = k THETA_STEP`, `k < N_THETA` (0 to 87.5 deg). Primary rays start
+//! uniformly over the tile's horizontal area (each carries `1 / R` of the flux on the tile,
+//! `R` the node's primary rays) and are followed geometrically (mirror reflection off the
+//! triangles, [`crate::reference::trace::trace_segment`]). A ray that leaves after exactly two
+//! reflections is kept as its two facets' slopes; the fractions leaving after 1, 2 and 3+
+//! reflections are the orders' albedos for `F = 1`. Each ray comes from its own random
+//! azimuth and its path is rotated back to azimuth 0: one surface realization is not
+//! isotropic (its valleys have preferred directions), and only an isotropic bank is
+//! reciprocal after the table's rotations (without it the reciprocal partners of the table
+//! disagreed by up to 30% on two 128 x 128 tiles). The same surfaces, start points and
+//! azimuths serve every incidence node (common random numbers: the table is smooth from
+//! node to node). Surfaces come from
+//! their own seed streams, so a reference run ([`crate::reference::run`]) with any seed
+//! never traces the bank's surfaces.
+//!
+//! # The table ([`OrderTable`])
+//! `f2(wi, wo)` (Mueller, 1/sr) on nodes `(theta_i, theta_o, phi)`: `theta_i`, `theta_o` on the
+//! same `N_THETA` nodes and `phi = phi_o - phi_i` on `N_PHI` nodes over `[0, pi]`, in the `Sp`
+//! beam frames ([`Frame::Sp`]; at `theta = 0` the limit along the node's azimuth, so that
+//! the table is smooth on the `(theta, phi)` rectangle). Each path's Mueller matrix (the
+//! composed Jones matrix of [`super::double::double_jones_in`]) is spread onto the nodes by
+//! a tent kernel in `theta_o` and `phi` (mirror images folded onto `phi >= 0`) and divided
+//! by the kernel's cosine-weighted solid angle: each node holds the kernel-weighted mean of
+//! `f2` around it, like the reference's detector cones. At the pole (`theta_o = 0`) the
+//! paths within one `theta` step are pooled over all azimuths in basis vectors parallel
+//! transported from the zenith (smooth there), then expressed in each azimuth's `Sp` basis.
+//!
+//! Symmetries, exact on the nodes and kept by the interpolation: reciprocity
+//! (`M(wo, wi) = C M(wi, wo)^T C`, [`crate::optics::mueller::reciprocal`]) with a rotation
+//! about `n` and the mirror `y -> -y` (`M -> D M D`, `D = diag(1, 1, -1, -1)` in `Sp`
+//! frames) maps node `(o, i, phi)` to `E T(i, o, phi)^T E`, `E = diag(1, 1, 1, -1)`; the table
+//! is the mean of the two, so `f2` is reciprocal to rounding. Between nodes: trilinear
+//! interpolation in `(theta_i, theta_o, phi)`; beyond the last node (87.5 deg) the last
+//! node's value.
+
+use super::double::double_jones_in;
+use crate::optics::frames::{beam_bases, change_bases, cross, dot, neg, normalize, Frame, V3};
+use crate::optics::fresnel::Eta;
+use crate::optics::mueller::{jones_to_mueller, Mat4};
+use crate::reference::microsurface::{check_gaussian, gaussian_height_field};
+use crate::reference::rng::Rng;
+use crate::reference::trace::{trace_segment, Segment};
+use crate::{Error, Result};
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// Spacing of the incidence and exit nodes in `theta` (2.5 deg).
+pub const THETA_STEP: f64 = PI / 72.0;
+/// Nodes in `theta`: 0, 2.5, ..., 87.5 deg.
+pub const N_THETA: usize = 36;
+/// Nodes in `phi = phi_o - phi_i` over `[0, pi]` (7.5 deg apart).
+pub const N_PHI: usize = 25;
+/// Primary rays per parallel work item (fixed: results do not depend on the thread count).
+const CHUNK: u64 = 4096;
+/// Seed-stream tag of the bank's surfaces and rays (the reference uses 0 and 1).
+const STREAM: u64 = 0x6261_6e6b;
+
+/// What to trace.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BankSpec {
+    /// Beckmann roughness of the surfaces (`alpha^2 = 2 var(slope component)`).
+    pub alpha: f64,
+    /// Tile size in grid cells.
+    pub grid: usize,
+    /// Height correlation length in grid cells (`C(r) ~ exp(-r^2 / l^2)`).
+    pub correlation_length: f64,
+    /// Primary rays per incidence node (over all surfaces).
+    pub rays: u64,
+    /// Independent random surfaces (the rays are shared among them).
+    pub surfaces: u32,
+    pub seed: u64,
+}
+
+impl BankSpec {
+    /// Check every parameter, naming the offending one.
+    pub fn validate(&self) -> Result<()> {
+        check_gaussian(self.alpha, self.grid, self.correlation_length)?;
+        if !(1..=10_000).contains(&self.surfaces) {
+            return Err(Error::param(
+                "surfaces",
+                self.surfaces,
+                "must be in [1, 10000]",
+            ));
+        }
+        if self.rays < self.surfaces as u64 || self.rays > 1u64 << 36 {
+            return Err(Error::param(
+                "rays",
+                self.rays,
+                format!("must be in [surfaces = {}, 2^36]", self.surfaces),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The order-2 paths of [`BankSpec`]'s surfaces at each incidence node (module docs).
+#[derive(Debug, Clone)]
+pub struct PathBank {
+    pub spec: BankSpec,
+    /// Primary rays traced per incidence node.
+    pub rays: Vec<u64>,
+    /// Per incidence node, the order-2 paths: slopes `(sx1, sy1, sx2, sy2)` of the two facets
+    /// (unit normal `normalize(-sx, -sy, 1)`).
+    pub paths: Vec<Vec<[f32; 4]>>,
+    /// Per incidence node, the fractions of the flux leaving after 1, 2 and 3 or more
+    /// reflections (`F = 1`; 3+ includes rays still on the surface after 3).
+    pub albedo: Vec<[f64; 3]>,
+    /// Rays lost by the traversal (numerical failures; expected 0).
+    pub lost: u64,
+}
+
+/// The incidence direction of node `k`.
+pub fn node_direction(k: usize) -> V3 {
+    let (s, c) = (k as f64 * THETA_STEP).sin_cos();
+    V3::new(s, 0.0, c)
+}
+
+#[inline]
+fn facet(sx: f64, sy: f64) -> V3 {
+    normalize(V3::new(-sx, -sy, 1.0))
+}
+
+/// Mirror reflection of direction `d` off unit normal `h` (`d . h < 0`).
+#[inline]
+fn bounce(d: V3, h: V3) -> V3 {
+    let c = (-dot(d, h)).clamp(0.0, 1.0);
+    normalize(d + 2.0 * c * h)
+}
+
+/// What one primary ray did: `0` lost, `1`/`2` escaped after that many reflections (with
+/// the facets' slopes for 2), `3` three or more.
+enum RayFate {
+    Lost,
+    Order1,
+    Order2([f32; 4]),
+    Higher,
+}
+
+fn follow(
+    f: &crate::reference::microsurface::HeightField,
+    wi: V3,
+    start: V3,
+    max_cells: usize,
+) -> RayFate {
+    let period = f.n as f64;
+    let (mut o, mut d) = (start, neg(wi));
+    let mut slopes = [0.0f32; 4];
+    for order in 0..3 {
+        match trace_segment(f, o, d, max_cells) {
+            Segment::Escaped => {
+                return match order {
+                    1 => RayFate::Order1,
+                    2 => RayFate::Order2(slopes),
+                    _ => RayFate::Lost,
+                }
+            }
+            Segment::Lost => return RayFate::Lost,
+            Segment::Hit { t, plane } => {
+                if order == 2 {
+                    return RayFate::Higher;
+                }
+                o = V3::new(
+                    (o[0] + t * d[0]).rem_euclid(period),
+                    (o[1] + t * d[1]).rem_euclid(period),
+                    o[2] + t * d[2],
+                );
+                slopes[2 * order] = plane.sx as f32;
+                slopes[2 * order + 1] = plane.sy as f32;
+                // the facet as stored (f32), so that the table sees the path it is given
+                let h = facet(slopes[2 * order] as f64, slopes[2 * order + 1] as f64);
+                d = bounce(d, h);
+            }
+        }
+    }
+    RayFate::Higher
+}
+
+impl PathBank {
+    /// Trace the bank (module docs). Parallel over rays; deterministic in `spec.seed`
+    /// whatever the number of threads.
+    pub fn trace(spec: &BankSpec) -> Result<PathBank> {
+        spec.validate()?;
+        let ns = spec.surfaces as u64;
+        let mut paths = vec![Vec::new(); N_THETA];
+        let mut counts = vec![[0u64; 3]; N_THETA];
+        let mut lost = 0u64;
+        for s in 0..ns {
+            let (field, _) = gaussian_height_field(
+                spec.alpha,
+                spec.grid,
+                spec.correlation_length,
+                spec.seed,
+                &[STREAM, s],
+            )?;
+            let rays_s = spec.rays / ns + u64::from(s < spec.rays % ns);
+            let n_chunks = rays_s.div_ceil(CHUNK);
+            let max_cells = 64 * field.n + 4096;
+            let period = field.n as f64;
+            let z0 = field.h_max + 1e-3;
+            for (k, (node_paths, node_counts)) in paths.iter_mut().zip(&mut counts).enumerate() {
+                let wi = node_direction(k);
+                let chunks: Vec<(Vec<[f32; 4]>, [u64; 3], u64)> = (0..n_chunks)
+                    .into_par_iter()
+                    .map(|c| {
+                        // the same start points and azimuths at every node (common random numbers)
+                        let mut rng = Rng::new(spec.seed, &[STREAM + 1, s, c]);
+                        let (mut out, mut cnt, mut lost) = (Vec::new(), [0u64; 3], 0u64);
+                        for _ in 0..CHUNK.min(rays_s - c * CHUNK) {
+                            let start = V3::new(rng.uniform() * period, rng.uniform() * period, z0);
+                            // a random azimuth of incidence per ray: one realization is not
+                            // isotropic, the bank must be (rotations and reciprocity)
+                            let (sp, cp) = (std::f64::consts::TAU * rng.uniform()).sin_cos();
+                            let w = V3::new(wi[0] * cp, wi[0] * sp, wi[2]);
+                            match follow(&field, w, start, max_cells) {
+                                RayFate::Lost => lost += 1,
+                                RayFate::Order1 => cnt[0] += 1,
+                                RayFate::Order2(p) => {
+                                    cnt[1] += 1;
+                                    // rotated by -azimuth: incidence at azimuth 0
+                                    let rot = |x: f32, y: f32| {
+                                        let (x, y) = (x as f64, y as f64);
+                                        [(cp * x + sp * y) as f32, (-sp * x + cp * y) as f32]
+                                    };
+                                    let [a, b] = rot(p[0], p[1]);
+                                    let [c2, d] = rot(p[2], p[3]);
+                                    out.push([a, b, c2, d]);
+                                }
+                                RayFate::Higher => cnt[2] += 1,
+                            }
+                        }
+                        (out, cnt, lost)
+                    })
+                    .collect();
+                for (out, cnt, l) in chunks {
+                    node_paths.extend_from_slice(&out);
+                    for (a, b) in node_counts.iter_mut().zip(cnt) {
+                        *a += b;
+                    }
+                    lost += l;
+                }
+            }
+        }
+        let albedo = counts
+            .iter()
+            .map(|c| c.map(|x| x as f64 / spec.rays as f64))
+            .collect();
+        Ok(PathBank {
+            spec: spec.clone(),
+            rays: vec![spec.rays; N_THETA],
+            paths,
+            albedo,
+            lost,
+        })
+    }
+}
+
+/// `f2` of one material on the nodes (module docs), `Sp` frames.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderTable {
+    /// `data[(i * N_THETA + o) * N_PHI + j]`: node `theta_i = i THETA_STEP`,
+    /// `theta_o = o THETA_STEP`, `phi = j pi / (N_PHI - 1)`.
+    pub data: Vec<Mat4>,
+}
+
+/// `E = diag(1, 1, 1, -1)`: node `(o, i, phi)` is `E T(i, o, phi)^T E` (module docs).
+const E: [f64; 4] = [1.0, 1.0, 1.0, -1.0];
+/// The mirror `y -> -y` in `Sp` frames: `M -> D M D`.
+const D: [f64; 4] = [1.0, 1.0, -1.0, -1.0];
+
+/// Zenith-transported Stokes basis at `w`: the minimal rotation taking `+z` to `w` applied
+/// to `(x, y)` (smooth over the hemisphere, `(x, y)` at the pole).
+fn transported(w: V3) -> (V3, V3) {
+    let a = 1.0 / (1.0 + w[2]);
+    let x = V3::new(1.0 - w[0] * w[0] * a, -w[0] * w[1] * a, -w[0]);
+    (x, cross(w, x))
+}
+
+/// The `Sp` output basis at azimuth `(cos phi, sin phi)` for direction `w`.
+fn sp_out(w: V3, cp: f64, sp: f64) -> (V3, V3) {
+    let x = V3::new(sp, -cp, 0.0);
+    (x, cross(w, x))
+}
+
+fn add(acc: &mut Mat4, m: &Mat4, w: f64) {
+    for (a, b) in acc.iter_mut().flatten().zip(m.iter().flatten()) {
+        *a += w * b;
+    }
+}
+
+impl OrderTable {
+    /// Apply index `eta` to every path of `bank` and tabulate (module docs).
+    pub fn build(bank: &PathBank, eta: Eta) -> OrderTable {
+        Self::spread(bank, eta).reciprocal_mean()
+    }
+
+    /// The kernel estimate alone, before the reciprocity mean.
+    pub fn spread(bank: &PathBank, eta: Eta) -> OrderTable {
+        let dphi = PI / (N_PHI - 1) as f64;
+        let a_theta: Vec<f64> = (0..N_THETA).map(theta_weight).collect();
+        let rows: Vec<Vec<Mat4>> = (0..N_THETA)
+            .into_par_iter()
+            .map(|i| {
+                let wi = node_direction(i);
+                let x_in = V3::Y;
+                let y_in = cross(neg(wi), x_in);
+                let mut sums = vec![[[0.0; 4]; 4]; N_THETA * N_PHI];
+                let mut pole = [[0.0; 4]; 4];
+                for p in &bank.paths[i] {
+                    let (mut h1, mut h2) = (
+                        facet(p[0] as f64, p[1] as f64),
+                        facet(p[2] as f64, p[3] as f64),
+                    );
+                    let mut wo = bounce(bounce(neg(wi), h1), h2);
+                    if wo[1] < 0.0 {
+                        // fold onto phi >= 0 by the mirror image of the path
+                        h1[1] = -h1[1];
+                        h2[1] = -h2[1];
+                        wo[1] = -wo[1];
+                    }
+                    if wo[2] <= 0.0 {
+                        continue;
+                    }
+                    let rho = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
+                    let (cp, sp) = if rho > 1e-14 {
+                        (wo[0] / rho, wo[1] / rho)
+                    } else {
+                        (1.0, 0.0)
+                    };
+                    let (x_out, y_out) = sp_out(wo, cp, sp);
+                    let bases = (x_in, y_in, x_out, y_out);
+                    let Some((j, _, _)) = double_jones_in(eta, wi, wo, h1, bases) else {
+                        continue;
+                    };
+                    let m = jones_to_mueller(&j);
+                    let theta = wo[2].clamp(-1.0, 1.0).acos();
+                    let phi = sp.atan2(cp).clamp(0.0, PI);
+                    let u = theta / THETA_STEP;
+                    let k0 = (u.floor() as usize).min(N_THETA - 1);
+                    let ft = u - k0 as f64;
+                    let v = phi / dphi;
+                    let j0 = (v.floor() as usize).min(N_PHI - 2);
+                    let fp = v - j0 as f64;
+                    for (k, wk) in [(k0, 1.0 - ft), (k0 + 1, ft)] {
+                        if k >= N_THETA || wk <= 0.0 {
+                            continue;
+                        }
+                        if k == 0 {
+                            let (xt, yt) = transported(wo);
+                            let mt = change_bases(&m, bases, (x_in, y_in, xt, yt));
+                            add(&mut pole, &mt, wk);
+                        } else {
+                            add(&mut sums[k * N_PHI + j0], &m, wk * (1.0 - fp));
+                            add(&mut sums[k * N_PHI + j0 + 1], &m, wk * fp);
+                        }
+                    }
+                }
+                let r = bank.rays[i] as f64;
+                for k in 1..N_THETA {
+                    for j in 0..N_PHI {
+                        let b = if j == 0 || j == N_PHI - 1 {
+                            dphi
+                        } else {
+                            2.0 * dphi
+                        };
+                        let m = &mut sums[k * N_PHI + j];
+                        m.iter_mut()
+                            .flatten()
+                            .for_each(|x| *x /= r * a_theta[k] * b);
+                    }
+                }
+                // the pole: pooled over the full circle, then in each azimuth's Sp basis
+                let norm = r * a_theta[0] * 2.0 * PI;
+                pole.iter_mut().flatten().for_each(|x| *x /= norm);
+                let (xt, yt) = transported(V3::Z);
+                for (j, node) in sums.iter_mut().take(N_PHI).enumerate() {
+                    let (sp, cp) = (j as f64 * dphi).sin_cos();
+                    let (xo, yo) = sp_out(V3::Z, cp, sp);
+                    *node = change_bases(&pole, (x_in, y_in, xt, yt), (x_in, y_in, xo, yo));
+                }
+                sums
+            })
+            .collect();
+        OrderTable {
+            data: rows.into_iter().flatten().collect(),
+        }
+    }
+
+    /// The mean of each node and its reciprocal partner: node `(o, i, j)` is
+    /// `E T(i, o, j)^T E` (module docs).
+    fn reciprocal_mean(&self) -> OrderTable {
+        let at = |i: usize, o: usize, j: usize| &self.data[(i * N_THETA + o) * N_PHI + j];
+        let mut data = Vec::with_capacity(N_THETA * N_THETA * N_PHI);
+        for i in 0..N_THETA {
+            for o in 0..N_THETA {
+                for j in 0..N_PHI {
+                    let (t, r) = (at(i, o, j), at(o, i, j));
+                    let mut m = [[0.0; 4]; 4];
+                    for a in 0..4 {
+                        for b in 0..4 {
+                            m[a][b] = 0.5 * (t[a][b] + E[a] * r[b][a] * E[b]);
+                        }
+                    }
+                    data.push(m);
+                }
+            }
+        }
+        OrderTable { data }
+    }
+
+    /// `f2(wi, wo)` (1/sr) in the beam frames of `frame`; zero when either direction is on
+    /// or below the horizon.
+    pub fn eval(&self, wi: V3, wo: V3, frame: Frame) -> Mat4 {
+        let mut m = [[0.0; 4]; 4];
+        if wi[2] <= 0.0 || wo[2] <= 0.0 {
+            return m;
+        }
+        // the azimuths as the Sp frame of `beam_bases` takes them
+        let (x_in, _, x_out, _) = beam_bases(Frame::Sp, wi, wo);
+        // x_in = e_phi(phi_i) = (-sin, cos), x_out = -e_phi(phi_o) = (sin, -cos)
+        let (ci, si) = (x_in[1], -x_in[0]);
+        let (co, so) = (-x_out[1], x_out[0]);
+        let phi = (ci * so - si * co).atan2(ci * co + si * so);
+        let mirrored = phi < 0.0;
+        let coord = |t: f64, n: usize| {
+            let t = t.clamp(0.0, (n - 1) as f64);
+            let k = (t.floor() as usize).min(n - 2);
+            (k, t - k as f64)
+        };
+        let (i0, fi) = coord(wi[2].clamp(-1.0, 1.0).acos() / THETA_STEP, N_THETA);
+        let (o0, fo) = coord(wo[2].clamp(-1.0, 1.0).acos() / THETA_STEP, N_THETA);
+        let (j0, fj) = coord(phi.abs() / (PI / (N_PHI - 1) as f64), N_PHI);
+        for (i, wa) in [(i0, 1.0 - fi), (i0 + 1, fi)] {
+            for (o, wb) in [(o0, 1.0 - fo), (o0 + 1, fo)] {
+                for (j, wc) in [(j0, 1.0 - fj), (j0 + 1, fj)] {
+                    let w = wa * wb * wc;
+                    if w != 0.0 {
+                        add(&mut m, &self.data[(i * N_THETA + o) * N_PHI + j], w);
+                    }
+                }
+            }
+        }
+        if mirrored {
+            for (a, row) in m.iter_mut().enumerate() {
+                for (b, x) in row.iter_mut().enumerate() {
+                    *x *= D[a] * D[b];
+                }
+            }
+        }
+        if frame != Frame::Sp {
+            m = change_bases(&m, beam_bases(Frame::Sp, wi, wo), beam_bases(frame, wi, wo));
+        }
+        m
+    }
+
+    /// The directional albedo of the table at incidence node `i` for unpolarized light,
+    /// `int M00 cos(theta_o) d omega_o` in the kernel's own quadrature (each node's value
+    /// times its kernel's cosine-weighted solid angle): before the reciprocity mean this is
+    /// exactly the paths' flux (the tents are a partition of unity), less the paths beyond
+    /// the last node's tent.
+    pub fn node_albedo(&self, i: usize) -> f64 {
+        let dphi = PI / (N_PHI - 1) as f64;
+        let mut s = 0.0;
+        for o in 0..N_THETA {
+            for j in 0..N_PHI {
+                let b = if o == 0 {
+                    // the pole's value is one pooled value, in every azimuth's basis
+                    2.0 * PI / N_PHI as f64
+                } else if j == 0 || j == N_PHI - 1 {
+                    dphi
+                } else {
+                    2.0 * dphi
+                };
+                s += self.data[(i * N_THETA + o) * N_PHI + j][0][0] * theta_weight(o) * b;
+            }
+        }
+        s
+    }
+}
+
+/// `int K_k(theta) cos(theta) sin(theta) d theta` of node `k`'s tent over `[0, pi/2]`.
+fn theta_weight(k: usize) -> f64 {
+    let (c, h) = (k as f64 * THETA_STEP, THETA_STEP);
+    let n = 512;
+    let mut s = 0.0;
+    // midpoint rule on each side of the node (the kernel's kink is at the node)
+    for side in [-1.0, 1.0] {
+        for m in 0..n {
+            let u = (m as f64 + 0.5) / n as f64;
+            let t = c + side * u * h;
+            if (0.0..=0.5 * PI).contains(&t) {
+                s += (1.0 - u) * t.sin() * t.cos() * h / n as f64;
+            }
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,183 @@
+//! Bindings for `crate::brdf::bank` (order 2 from the surface's own paths). Used by
+//! `scripts/` for now; the Material option that will carry it is documented in
+//! `python/pprender/materials.py` once it lands.
+
+use crate::brdf::bank::{BankSpec, OrderTable, PathBank, N_PHI, N_THETA};
+use crate::optics::frames::{Frame, V3};
+use crate::optics::fresnel::{Eta, C64};
+use crate::Error;
+use numpy::ndarray::{Array2, Array3, Array5};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyArray5, PyReadonlyArray2};
+use pyo3::prelude::*;
+use std::str::FromStr;
+
+fn parse_eta(eta: C64) -> crate::Result<Eta> {
+    if eta.re.is_nan() || eta.im.is_nan() {
+        return Err(Error::param("eta", eta, "must not be NaN"));
+    }
+    if eta.re == f64::INFINITY {
+        return Ok(Eta::PerfectConductor);
+    }
+    if !(eta.re > 0.0 && eta.im >= 0.0 && eta.re.is_finite() && eta.im.is_finite()) {
+        return Err(Error::param(
+            "eta",
+            eta,
+            "must be n + ik with n > 0, k >= 0 finite (or inf for a perfect conductor)",
+        ));
+    }
+    Ok(Eta::Complex(eta))
+}
+
+/// `PathBank(alpha, rays, surfaces=64, grid=256, correlation_length=8.0, seed=1)`: the
+/// order-2 paths of Gaussian-correlated Beckmann surfaces (`crate::brdf::bank`).
+#[pyclass(module = "pprender._core", name = "PathBank", frozen)]
+pub struct PyPathBank(PathBank);
+
+#[pymethods]
+impl PyPathBank {
+    #[new]
+    #[pyo3(signature = (alpha, rays, surfaces=64, grid=256, correlation_length=8.0, seed=1))]
+    fn new(
+        py: Python<'_>,
+        alpha: f64,
+        rays: u64,
+        surfaces: u32,
+        grid: usize,
+        correlation_length: f64,
+        seed: u64,
+    ) -> PyResult<Self> {
+        let spec = BankSpec {
+            alpha,
+            grid,
+            correlation_length,
+            rays,
+            surfaces,
+            seed,
+        };
+        let bank = py.detach(|| PathBank::trace(&spec))?;
+        Ok(PyPathBank(bank))
+    }
+
+    /// `(N_THETA, 3)`: per incidence node, the flux fractions leaving after 1, 2, 3+ reflections.
+    #[getter]
+    fn albedo<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let a = Array2::from_shape_fn((N_THETA, 3), |(i, o)| self.0.albedo[i][o]);
+        a.into_pyarray(py)
+    }
+
+    /// Order-2 paths kept per incidence node.
+    #[getter]
+    fn paths(&self) -> Vec<usize> {
+        self.0.paths.iter().map(Vec::len).collect()
+    }
+
+    /// `(P, 4)` float32: the order-2 paths of incidence node `i`, slopes `(sx1, sy1, sx2, sy2)`.
+    fn paths_at<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let p = self
+            .0
+            .paths
+            .get(i)
+            .ok_or_else(|| Error::param("i", i, format!("must be in [0, {}]", N_THETA - 1)))?;
+        let a = Array2::from_shape_fn((p.len(), 4), |(k, c)| p[k][c]);
+        Ok(a.into_pyarray(py))
+    }
+
+    #[getter]
+    fn rays(&self) -> u64 {
+        self.0.spec.rays
+    }
+
+    #[getter]
+    fn lost(&self) -> u64 {
+        self.0.lost
+    }
+
+    /// The incidence (and exit) nodes in radians.
+    #[getter]
+    fn theta(&self) -> Vec<f64> {
+        (0..N_THETA)
+            .map(|k| k as f64 * crate::brdf::bank::THETA_STEP)
+            .collect()
+    }
+
+    /// The order-2 table for index `eta` (`inf` for a perfect conductor); `reciprocal=False`
+    /// skips the reciprocity mean (the kernel estimate alone, a diagnostic).
+    #[pyo3(signature = (eta, reciprocal=true))]
+    fn table(&self, py: Python<'_>, eta: C64, reciprocal: bool) -> PyResult<PyOrderTable> {
+        let eta = parse_eta(eta)?;
+        Ok(PyOrderTable(py.detach(|| {
+            if reciprocal {
+                OrderTable::build(&self.0, eta)
+            } else {
+                OrderTable::spread(&self.0, eta)
+            }
+        })))
+    }
+}
+
+/// An order-2 Mueller table (`crate::brdf::bank::OrderTable`).
+#[pyclass(module = "pprender._core", name = "OrderTable", frozen)]
+pub struct PyOrderTable(OrderTable);
+
+#[pymethods]
+impl PyOrderTable {
+    /// `eval(wi, wo, frame="sp") -> (N, 4, 4)`: `f2` (1/sr) for direction pairs `(N, 3)`.
+    #[pyo3(signature = (wi, wo, frame="sp"))]
+    fn eval<'py>(
+        &self,
+        py: Python<'py>,
+        wi: PyReadonlyArray2<'py, f64>,
+        wo: PyReadonlyArray2<'py, f64>,
+        frame: &str,
+    ) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let frame = Frame::from_str(frame)?;
+        let (wi, wo) = (wi.as_array(), wo.as_array());
+        if wi.ncols() != 3 || wo.ncols() != 3 || wi.nrows() != wo.nrows() {
+            return Err(Error::Shape(format!(
+                "wi and wo must both have shape (N, 3), got {:?} and {:?}",
+                wi.shape(),
+                wo.shape()
+            ))
+            .into());
+        }
+        let n = wi.nrows();
+        let mut out = Array3::<f64>::zeros((n, 4, 4));
+        for k in 0..n {
+            let a = V3::new(wi[[k, 0]], wi[[k, 1]], wi[[k, 2]]);
+            let b = V3::new(wo[[k, 0]], wo[[k, 1]], wo[[k, 2]]);
+            if !(a.is_finite() && b.is_finite()) {
+                return Err(Error::param("wi, wo", k, "directions must be finite").into());
+            }
+            let m = self.0.eval(a.normalize(), b.normalize(), frame);
+            for r in 0..4 {
+                for c in 0..4 {
+                    out[[k, r, c]] = m[r][c];
+                }
+            }
+        }
+        Ok(out.into_pyarray(py))
+    }
+
+    /// `(N_THETA, N_THETA, N_PHI, 4, 4)`: the nodes (`Sp` frames).
+    #[getter]
+    fn data<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray5<f64>> {
+        let a = Array5::from_shape_fn((N_THETA, N_THETA, N_PHI, 4, 4), |(i, o, j, r, c)| {
+            self.0.data[(i * N_THETA + o) * N_PHI + j][r][c]
+        });
+        a.into_pyarray(py)
+    }
+
+    /// The table's albedo at incidence node `i` (unpolarized).
+    fn node_albedo(&self, i: usize) -> PyResult<f64> {
+        if i >= N_THETA {
+            return Err(Error::param("i", i, format!("must be in [0, {}]", N_THETA - 1)).into());
+        }
+        Ok(self.0.node_albedo(i))
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyPathBank>()?;
+    m.add_class::<PyOrderTable>()?;
+    Ok(())
+}
