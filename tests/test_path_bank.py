@@ -16,9 +16,10 @@ def bank():
 
 
 def test_shapes_and_reciprocity(bank) -> None:
-    assert bank.albedo.shape == (36, 3) and len(bank.paths) == 36 and bank.lost == 0
+    assert bank.albedo.shape == (36, 9) and bank.paths.shape == (36, 7) and bank.lost == 0
     assert np.allclose(bank.albedo.sum(axis=1), 1.0, atol=1e-12)
-    assert bank.paths_at(0).shape == (bank.paths[0], 4)
+    assert bank.paths_at(0).shape == (bank.paths[0, 0], 4)
+    assert bank.paths_at(3, n=3).shape == (bank.paths[3, 1], 6)
     t = bank.table(complex(1.5, 0.0))
     assert t.data.shape == (36, 36, 25, 4, 4)
     rng = np.random.default_rng(1)
@@ -44,5 +45,7 @@ def test_bad_input_names_the_parameter(bank) -> None:
         bank.table(complex(-1.0, 0.0))
     with pytest.raises(pprender.Error, match=r"must be in \[0, 35\]"):
         bank.paths_at(36)
+    with pytest.raises(pprender.Error, match="orders"):
+        bank.table(2.0, orders=(1, 3))
     with pytest.raises(pprender.Error, match="shape"):
         bank.table(2.0).eval(np.zeros((2, 3)), np.zeros((3, 3)))

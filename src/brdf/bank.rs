@@ -1,13 +1,16 @@
-//! Order 2 of a Gaussian-correlated Beckmann surface from the surface's own paths (issue 24).
+//! Orders 2 and higher of a Gaussian-correlated Beckmann surface from the surface's own
+//! paths (issue 24).
 //!
 //! # Why
 //! The double term ([`super::double`]) draws the second facet independently of the first.
 //! On a real rough surface the second facet is the far wall of the same valley (PHYSICS.md
 //! section 5b), which turns order 2 back toward the source: the double term is 0.29x the
 //! explicit surface at normal-incidence backscatter for alpha 0.5, 2-4x at 50 deg
-//! (`docs/microsurface-comparison.md`). The geometry of order-2 paths depends only on the
-//! surface class (alpha and the shape of the autocorrelation), not on the material, so
-//! it is traced once and each material's Fresnel and Jones matrices are applied per path.
+//! (`docs/microsurface-comparison.md`); and the multiple term, which stands for orders 3+,
+//! is fully depolarizing where the surface's 3+ is not. The geometry of the paths depends
+//! only on the surface class (alpha and the shape of the autocorrelation), not on the
+//! material, so it is traced once and each material's Fresnel and Jones matrices are
+//! applied per path.
 //!
 //! # The bank ([`PathBank`])
 //! Gaussian random surfaces with a Gaussian autocorrelation
@@ -16,48 +19,52 @@
 //! incidence nodes `theta_i = k THETA_STEP`, `k < N_THETA` (0 to 87.5 deg). Primary rays start
 //! uniformly over the tile's horizontal area (each carries `1 / R` of the flux on the tile,
 //! `R` the node's primary rays) and are followed geometrically (mirror reflection off the
-//! triangles, [`crate::reference::trace::trace_segment`]). A ray that leaves after exactly two
-//! reflections is kept as its two facets' slopes; the fractions leaving after 1, 2 and 3+
-//! reflections are the orders' albedos for `F = 1`. Each ray comes from its own random
-//! azimuth and its path is rotated back to azimuth 0: one surface realization is not
-//! isotropic (its valleys have preferred directions), and only an isotropic bank is
-//! reciprocal after the table's rotations (without it the reciprocal partners of the table
-//! disagreed by up to 30% on two 128 x 128 tiles). The same surfaces, start points and
-//! azimuths serve every incidence node (common random numbers: the table is smooth from
-//! node to node). Surfaces come from
-//! their own seed streams, so a reference run ([`crate::reference::run`]) with any seed
-//! never traces the bank's surfaces.
+//! triangles, [`crate::reference::trace::trace_segment`]). A ray that leaves after `n`
+//! reflections (`2 <= n <= MAX_ORDER`) is kept as its facets' slopes; the fractions leaving
+//! after each number of reflections are the orders' albedos for `F = 1`. Each ray comes
+//! from its own random azimuth and its path is rotated back to azimuth 0: one surface
+//! realization is not isotropic (its valleys have preferred directions), and only an
+//! isotropic bank is reciprocal after the table's rotations (without it the reciprocal
+//! partners of the table disagreed by up to 30% on two 128 x 128 tiles). The same
+//! surfaces, start points and azimuths serve every incidence node (common random numbers:
+//! the table is smooth from node to node). Surfaces come from their own seed streams, so a
+//! reference run ([`crate::reference::run`]) with any seed never traces the bank's surfaces.
 //!
 //! # The table ([`OrderTable`])
-//! `f2(wi, wo)` (Mueller, 1/sr) on nodes `(theta_i, theta_o, phi)`: `theta_i`, `theta_o` on the
-//! same `N_THETA` nodes and `phi = phi_o - phi_i` on `N_PHI` nodes over `[0, pi]`, in the `Sp`
-//! beam frames ([`Frame::Sp`]; at `theta = 0` the limit along the node's azimuth, so that
-//! the table is smooth on the `(theta, phi)` rectangle). Each path's Mueller matrix (the
-//! composed Jones matrix of [`super::double::double_jones_in`]) is spread onto the nodes by
-//! a tent kernel in `theta_o` and `phi` (mirror images folded onto `phi >= 0`) and divided
-//! by the kernel's cosine-weighted solid angle: each node holds the kernel-weighted mean of
-//! `f2` around it, like the reference's detector cones. At the pole (`theta_o = 0`) the
-//! paths within one `theta` step are pooled over all azimuths in basis vectors parallel
-//! transported from the zenith (smooth there), then expressed in each azimuth's `Sp` basis.
+//! `f_n(wi, wo)` (Mueller, 1/sr) summed over a range of orders `n`, on nodes
+//! `(theta_i, theta_o, phi)`: `theta_i`, `theta_o` on the same `N_THETA` nodes and
+//! `phi = phi_o - phi_i` on `N_PHI` nodes over `[0, pi]`, in the `Sp` beam frames
+//! ([`Frame::Sp`]; at `theta = 0` the limit along the node's azimuth, so that the table is
+//! smooth on the `(theta, phi)` rectangle). Each path's Mueller matrix (its Jones matrix
+//! composed facet by facet, [`path_jones`], with the double term's per-facet map) is
+//! spread onto the nodes by a tent kernel in `theta_o` and `phi` (mirror images folded onto
+//! `phi >= 0`) and divided by the kernel's cosine-weighted solid angle: each node holds the
+//! kernel-weighted mean of `f` around it, like the reference's detector cones. At the pole
+//! (`theta_o = 0`) the paths within one `theta` step are pooled over all azimuths in basis
+//! vectors parallel transported from the zenith (smooth there), then expressed in each
+//! azimuth's `Sp` basis.
 //!
 //! Symmetries, exact on the nodes and kept by the interpolation: reciprocity
 //! (`M(wo, wi) = C M(wi, wo)^T C`, [`crate::optics::mueller::reciprocal`]) with a rotation
 //! about `n` and the mirror `y -> -y` (`M -> D M D`, `D = diag(1, 1, -1, -1)` in `Sp`
 //! frames) maps node `(o, i, phi)` to `E T(i, o, phi)^T E`, `E = diag(1, 1, 1, -1)`; the table
-//! is the mean of the two, so `f2` is reciprocal to rounding. Between nodes: trilinear
+//! is the mean of the two, so `f` is reciprocal to rounding. Between nodes: trilinear
 //! interpolation in `(theta_i, theta_o, phi)`; beyond the last node (87.5 deg) the last
 //! node's value.
 
-use super::double::double_jones_in;
-use crate::optics::frames::{beam_bases, change_bases, cross, dot, neg, normalize, Frame, V3};
-use crate::optics::fresnel::Eta;
-use crate::optics::mueller::{jones_to_mueller, Mat4};
+use super::double::reflect_field;
+use crate::optics::frames::{
+    beam_bases, change_bases, cross, dot, mitsuba_basis, neg, normalize, Frame, V3,
+};
+use crate::optics::fresnel::{fresnel_amplitudes, Eta, C64};
+use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 use crate::reference::microsurface::{check_gaussian, gaussian_height_field};
 use crate::reference::rng::Rng;
 use crate::reference::trace::{trace_segment, Segment};
 use crate::{Error, Result};
 use rayon::prelude::*;
 use std::f64::consts::PI;
+use std::ops::RangeInclusive;
 
 /// Spacing of the incidence and exit nodes in `theta` (2.5 deg).
 pub const THETA_STEP: f64 = PI / 72.0;
@@ -67,6 +74,9 @@ pub const N_THETA: usize = 36;
 pub const N_PHI: usize = 25;
 /// Primary rays per parallel work item (fixed: results do not depend on the thread count).
 const CHUNK: u64 = 4096;
+/// The most reflections a banked path has (rays still on the surface after them are counted
+/// as truncated: below 1e-4 of the flux for alpha <= 1).
+pub const MAX_ORDER: usize = 8;
 /// Seed-stream tag of the bank's surfaces and rays (the reference uses 0 and 1).
 const STREAM: u64 = 0x6261_6e6b;
 
@@ -108,20 +118,31 @@ impl BankSpec {
     }
 }
 
-/// The order-2 paths of [`BankSpec`]'s surfaces at each incidence node (module docs).
+/// The paths of orders 2 to [`MAX_ORDER`] of [`BankSpec`]'s surfaces at each incidence node
+/// (module docs).
 #[derive(Debug, Clone)]
 pub struct PathBank {
     pub spec: BankSpec,
     /// Primary rays traced per incidence node.
     pub rays: Vec<u64>,
-    /// Per incidence node, the order-2 paths: slopes `(sx1, sy1, sx2, sy2)` of the two facets
-    /// (unit normal `normalize(-sx, -sy, 1)`).
-    pub paths: Vec<Vec<[f32; 4]>>,
-    /// Per incidence node, the fractions of the flux leaving after 1, 2 and 3 or more
-    /// reflections (`F = 1`; 3+ includes rays still on the surface after 3).
-    pub albedo: Vec<[f64; 3]>,
+    /// `paths[node][n - 2]`: the paths that left after exactly `n` reflections
+    /// (`2 <= n <= MAX_ORDER`), flat: the slopes `(sx, sy)` of their `n` facets in order
+    /// (`2 n` values per path; unit normal `normalize(-sx, -sy, 1)`).
+    pub paths: Vec<Vec<Vec<f32>>>,
+    /// `albedo[node][n - 1]`: the fraction of the flux leaving after exactly `n` reflections
+    /// (`F = 1`).
+    pub albedo: Vec<[f64; MAX_ORDER]>,
+    /// Per node, the fraction still on the surface after `MAX_ORDER` reflections.
+    pub truncated: Vec<f64>,
     /// Rays lost by the traversal (numerical failures; expected 0).
     pub lost: u64,
+}
+
+impl PathBank {
+    /// The order-`n` paths of node `i`, each the `2 n` slopes of its facets.
+    pub fn paths_of(&self, i: usize, n: usize) -> std::slice::ChunksExact<'_, f32> {
+        self.paths[i][n - 2].chunks_exact(2 * n)
+    }
 }
 
 /// The incidence direction of node `k`.
@@ -142,13 +163,13 @@ fn bounce(d: V3, h: V3) -> V3 {
     normalize(d + 2.0 * c * h)
 }
 
-/// What one primary ray did: `0` lost, `1`/`2` escaped after that many reflections (with
-/// the facets' slopes for 2), `3` three or more.
+/// What one primary ray did.
 enum RayFate {
     Lost,
-    Order1,
-    Order2([f32; 4]),
-    Higher,
+    /// Left after `n` reflections off the facets with these slopes (the first `2 n` values).
+    Escaped(usize, [f32; 2 * MAX_ORDER]),
+    /// Still on the surface after `MAX_ORDER` reflections.
+    Truncated,
 }
 
 fn follow(
@@ -159,20 +180,20 @@ fn follow(
 ) -> RayFate {
     let period = f.n as f64;
     let (mut o, mut d) = (start, neg(wi));
-    let mut slopes = [0.0f32; 4];
-    for order in 0..3 {
+    let mut slopes = [0.0f32; 2 * MAX_ORDER];
+    for order in 0..=MAX_ORDER {
         match trace_segment(f, o, d, max_cells) {
             Segment::Escaped => {
-                return match order {
-                    1 => RayFate::Order1,
-                    2 => RayFate::Order2(slopes),
-                    _ => RayFate::Lost,
+                return if order == 0 {
+                    RayFate::Lost
+                } else {
+                    RayFate::Escaped(order, slopes)
                 }
             }
             Segment::Lost => return RayFate::Lost,
             Segment::Hit { t, plane } => {
-                if order == 2 {
-                    return RayFate::Higher;
+                if order == MAX_ORDER {
+                    return RayFate::Truncated;
                 }
                 o = V3::new(
                     (o[0] + t * d[0]).rem_euclid(period),
@@ -187,7 +208,7 @@ fn follow(
             }
         }
     }
-    RayFate::Higher
+    RayFate::Truncated
 }
 
 impl PathBank {
@@ -196,8 +217,9 @@ impl PathBank {
     pub fn trace(spec: &BankSpec) -> Result<PathBank> {
         spec.validate()?;
         let ns = spec.surfaces as u64;
-        let mut paths = vec![Vec::new(); N_THETA];
-        let mut counts = vec![[0u64; 3]; N_THETA];
+        let mut paths = vec![vec![Vec::new(); MAX_ORDER - 1]; N_THETA];
+        // per node: rays leaving after 1..=MAX_ORDER reflections, then truncated
+        let mut counts = vec![[0u64; MAX_ORDER + 1]; N_THETA];
         let mut lost = 0u64;
         for s in 0..ns {
             let (field, _) = gaussian_height_field(
@@ -214,12 +236,14 @@ impl PathBank {
             let z0 = field.h_max + 1e-3;
             for (k, (node_paths, node_counts)) in paths.iter_mut().zip(&mut counts).enumerate() {
                 let wi = node_direction(k);
-                let chunks: Vec<(Vec<[f32; 4]>, [u64; 3], u64)> = (0..n_chunks)
+                type Chunk = (Vec<Vec<f32>>, [u64; MAX_ORDER + 1], u64);
+                let chunks: Vec<Chunk> = (0..n_chunks)
                     .into_par_iter()
                     .map(|c| {
                         // the same start points and azimuths at every node (common random numbers)
                         let mut rng = Rng::new(spec.seed, &[STREAM + 1, s, c]);
-                        let (mut out, mut cnt, mut lost) = (Vec::new(), [0u64; 3], 0u64);
+                        let mut out = vec![Vec::new(); MAX_ORDER - 1];
+                        let (mut cnt, mut lost) = ([0u64; MAX_ORDER + 1], 0u64);
                         for _ in 0..CHUNK.min(rays_s - c * CHUNK) {
                             let start = V3::new(rng.uniform() * period, rng.uniform() * period, z0);
                             // a random azimuth of incidence per ray: one realization is not
@@ -228,26 +252,27 @@ impl PathBank {
                             let w = V3::new(wi[0] * cp, wi[0] * sp, wi[2]);
                             match follow(&field, w, start, max_cells) {
                                 RayFate::Lost => lost += 1,
-                                RayFate::Order1 => cnt[0] += 1,
-                                RayFate::Order2(p) => {
-                                    cnt[1] += 1;
-                                    // rotated by -azimuth: incidence at azimuth 0
-                                    let rot = |x: f32, y: f32| {
-                                        let (x, y) = (x as f64, y as f64);
-                                        [(cp * x + sp * y) as f32, (-sp * x + cp * y) as f32]
-                                    };
-                                    let [a, b] = rot(p[0], p[1]);
-                                    let [c2, d] = rot(p[2], p[3]);
-                                    out.push([a, b, c2, d]);
+                                RayFate::Truncated => cnt[MAX_ORDER] += 1,
+                                RayFate::Escaped(n, p) => {
+                                    cnt[n - 1] += 1;
+                                    if n >= 2 {
+                                        // rotated by -azimuth: incidence at azimuth 0
+                                        for q in p[..2 * n].chunks_exact(2) {
+                                            let (x, y) = (q[0] as f64, q[1] as f64);
+                                            out[n - 2].push((cp * x + sp * y) as f32);
+                                            out[n - 2].push((-sp * x + cp * y) as f32);
+                                        }
+                                    }
                                 }
-                                RayFate::Higher => cnt[2] += 1,
                             }
                         }
                         (out, cnt, lost)
                     })
                     .collect();
                 for (out, cnt, l) in chunks {
-                    node_paths.extend_from_slice(&out);
+                    for (a, b) in node_paths.iter_mut().zip(out) {
+                        a.extend_from_slice(&b);
+                    }
                     for (a, b) in node_counts.iter_mut().zip(cnt) {
                         *a += b;
                     }
@@ -255,21 +280,24 @@ impl PathBank {
                 }
             }
         }
+        let r = spec.rays as f64;
         let albedo = counts
             .iter()
-            .map(|c| c.map(|x| x as f64 / spec.rays as f64))
+            .map(|c| std::array::from_fn(|n| c[n] as f64 / r))
             .collect();
+        let truncated = counts.iter().map(|c| c[MAX_ORDER] as f64 / r).collect();
         Ok(PathBank {
             spec: spec.clone(),
             rays: vec![spec.rays; N_THETA],
             paths,
             albedo,
+            truncated,
             lost,
         })
     }
 }
 
-/// `f2` of one material on the nodes (module docs), `Sp` frames.
+/// The paths' light of one material on the nodes (module docs), `Sp` frames.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OrderTable {
     /// `data[(i * N_THETA + o) * N_PHI + j]`: node `theta_i = i THETA_STEP`,
@@ -296,6 +324,36 @@ fn sp_out(w: V3, cp: f64, sp: f64) -> (V3, V3) {
     (x, cross(w, x))
 }
 
+/// The Jones matrix, in the beam bases `(x_in, y_in, x_out, y_out)`, of light arriving along
+/// `-wi` and reflected off `facets` in turn (the per-facet map of
+/// [`super::double::reflect_field`], the double term's); `None` when a facet is met from
+/// behind.
+pub fn path_jones(eta: Eta, wi: V3, facets: &[V3], bases: (V3, V3, V3, V3)) -> Option<Jones> {
+    let (x_in, y_in, x_out, y_out) = bases;
+    let field = |v: V3| [0, 1, 2].map(|i| C64::new(v[i], 0.0));
+    let mut e = [field(x_in), field(y_in)];
+    let mut k = neg(wi);
+    for &h in facets {
+        let c = -dot(k, h);
+        if c <= 0.0 {
+            return None;
+        }
+        let k_out = normalize(k + 2.0 * c * h);
+        let (rs, rp) = fresnel_amplitudes(c.min(1.0), eta);
+        // any vector transverse to k serves at normal incidence on the facet
+        let perp = mitsuba_basis(k);
+        for col in e.iter_mut() {
+            *col = reflect_field(*col, k, k_out, h, rs, rp, perp);
+        }
+        k = k_out;
+    }
+    let proj = |a: V3, f: &[C64; 3]| f[0] * a[0] + f[1] * a[1] + f[2] * a[2];
+    Some([
+        [proj(x_out, &e[0]), proj(x_out, &e[1])],
+        [proj(y_out, &e[0]), proj(y_out, &e[1])],
+    ])
+}
+
 fn add(acc: &mut Mat4, m: &Mat4, w: f64) {
     for (a, b) in acc.iter_mut().flatten().zip(m.iter().flatten()) {
         *a += w * b;
@@ -303,13 +361,15 @@ fn add(acc: &mut Mat4, m: &Mat4, w: f64) {
 }
 
 impl OrderTable {
-    /// Apply index `eta` to every path of `bank` and tabulate (module docs).
-    pub fn build(bank: &PathBank, eta: Eta) -> OrderTable {
-        Self::spread(bank, eta).reciprocal_mean()
+    /// Apply index `eta` to every path of `bank` of an order in `orders` (within
+    /// `2..=MAX_ORDER`) and tabulate (module docs).
+    pub fn build(bank: &PathBank, eta: Eta, orders: RangeInclusive<usize>) -> OrderTable {
+        Self::spread(bank, eta, orders).reciprocal_mean()
     }
 
     /// The kernel estimate alone, before the reciprocity mean.
-    pub fn spread(bank: &PathBank, eta: Eta) -> OrderTable {
+    pub fn spread(bank: &PathBank, eta: Eta, orders: RangeInclusive<usize>) -> OrderTable {
+        let orders = (*orders.start()).max(2)..=(*orders.end()).min(MAX_ORDER);
         let dphi = PI / (N_PHI - 1) as f64;
         let a_theta: Vec<f64> = (0..N_THETA).map(theta_weight).collect();
         let rows: Vec<Vec<Mat4>> = (0..N_THETA)
@@ -320,16 +380,18 @@ impl OrderTable {
                 let y_in = cross(neg(wi), x_in);
                 let mut sums = vec![[[0.0; 4]; 4]; N_THETA * N_PHI];
                 let mut pole = [[0.0; 4]; 4];
-                for p in &bank.paths[i] {
-                    let (mut h1, mut h2) = (
-                        facet(p[0] as f64, p[1] as f64),
-                        facet(p[2] as f64, p[3] as f64),
-                    );
-                    let mut wo = bounce(bounce(neg(wi), h1), h2);
+                let mut hs = [V3::Z; MAX_ORDER];
+                let all = orders.clone().flat_map(|n| bank.paths_of(i, n));
+                for p in all {
+                    let n = p.len() / 2;
+                    let mut wo = neg(wi);
+                    for (h, q) in hs.iter_mut().zip(p.chunks_exact(2)) {
+                        *h = facet(q[0] as f64, q[1] as f64);
+                        wo = bounce(wo, *h);
+                    }
                     if wo[1] < 0.0 {
                         // fold onto phi >= 0 by the mirror image of the path
-                        h1[1] = -h1[1];
-                        h2[1] = -h2[1];
+                        hs[..n].iter_mut().for_each(|h| h[1] = -h[1]);
                         wo[1] = -wo[1];
                     }
                     if wo[2] <= 0.0 {
@@ -343,7 +405,7 @@ impl OrderTable {
                     };
                     let (x_out, y_out) = sp_out(wo, cp, sp);
                     let bases = (x_in, y_in, x_out, y_out);
-                    let Some((j, _, _)) = double_jones_in(eta, wi, wo, h1, bases) else {
+                    let Some(j) = path_jones(eta, wi, &hs[..n], bases) else {
                         continue;
                     };
                     let m = jones_to_mueller(&j);
@@ -422,7 +484,7 @@ impl OrderTable {
         OrderTable { data }
     }
 
-    /// `f2(wi, wo)` (1/sr) in the beam frames of `frame`; zero when either direction is on
+    /// `f(wi, wo)` (1/sr) in the beam frames of `frame`; zero when either direction is on
     /// or below the horizon.
     pub fn eval(&self, wi: V3, wo: V3, frame: Frame) -> Mat4 {
         let mut m = [[0.0; 4]; 4];

@@ -51,14 +51,14 @@ use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 use std::f64::consts::PI;
 
 /// A complex 3-vector (a field).
-type CV3 = [C64; 3];
+pub(crate) type CV3 = [C64; 3];
 
 /// Apply the polarization ray-tracing matrix of a reflection off facet `h` (incident
 /// propagation `k_in`, reflected `k_out`) to the field `e`:
 /// `rs s (s.e) + rp p_out (p_in.e)` on the basis of [`facet_sp_basis`] (`perp`: a unit
 /// vector normal to `k_in`, used at normal incidence on the facet).
 #[inline]
-fn reflect_field(e: CV3, k_in: V3, k_out: V3, h: V3, rs: C64, rp: C64, perp: V3) -> CV3 {
+pub(crate) fn reflect_field(e: CV3, k_in: V3, k_out: V3, h: V3, rs: C64, rp: C64, perp: V3) -> CV3 {
     let (s, p_in, p_out) = facet_sp_basis(k_in, k_out, h, perp);
     let es = s[0] * e[0] + s[1] * e[1] + s[2] * e[2];
     let ep = p_in[0] * e[0] + p_in[1] * e[1] + p_in[2] * e[2];

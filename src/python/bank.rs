@@ -2,7 +2,7 @@
 //! `scripts/` for now; the Material option that will carry it is documented in
 //! `python/pprender/materials.py` once it lands.
 
-use crate::brdf::bank::{BankSpec, OrderTable, PathBank, N_PHI, N_THETA};
+use crate::brdf::bank::{BankSpec, OrderTable, PathBank, MAX_ORDER, N_PHI, N_THETA};
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::{Eta, C64};
 use crate::Error;
@@ -58,27 +58,46 @@ impl PyPathBank {
         Ok(PyPathBank(bank))
     }
 
-    /// `(N_THETA, 3)`: per incidence node, the flux fractions leaving after 1, 2, 3+ reflections.
+    /// `(N_THETA, MAX_ORDER + 1)`: per incidence node, the flux fractions leaving after
+    /// 1, 2, ..., MAX_ORDER reflections, then the fraction still on the surface.
     #[getter]
     fn albedo<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let a = Array2::from_shape_fn((N_THETA, 3), |(i, o)| self.0.albedo[i][o]);
+        let a = Array2::from_shape_fn((N_THETA, MAX_ORDER + 1), |(i, o)| {
+            if o < MAX_ORDER {
+                self.0.albedo[i][o]
+            } else {
+                self.0.truncated[i]
+            }
+        });
         a.into_pyarray(py)
     }
 
-    /// Order-2 paths kept per incidence node.
+    /// `(N_THETA, MAX_ORDER - 1)`: the paths kept per incidence node and order 2, 3, ...
     #[getter]
-    fn paths(&self) -> Vec<usize> {
-        self.0.paths.iter().map(Vec::len).collect()
+    fn paths<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<u64>> {
+        let a = Array2::from_shape_fn((N_THETA, MAX_ORDER - 1), |(i, n)| {
+            (self.0.paths[i][n].len() / (2 * (n + 2))) as u64
+        });
+        a.into_pyarray(py)
     }
 
-    /// `(P, 4)` float32: the order-2 paths of incidence node `i`, slopes `(sx1, sy1, sx2, sy2)`.
-    fn paths_at<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
-        let p = self
-            .0
-            .paths
-            .get(i)
-            .ok_or_else(|| Error::param("i", i, format!("must be in [0, {}]", N_THETA - 1)))?;
-        let a = Array2::from_shape_fn((p.len(), 4), |(k, c)| p[k][c]);
+    /// `(P, 2 n)` float32: the order-`n` paths of incidence node `i`, the slopes
+    /// `(sx, sy)` of their facets in order.
+    #[pyo3(signature = (i, n=2))]
+    fn paths_at<'py>(
+        &self,
+        py: Python<'py>,
+        i: usize,
+        n: usize,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        if i >= N_THETA {
+            return Err(Error::param("i", i, format!("must be in [0, {}]", N_THETA - 1)).into());
+        }
+        if !(2..=MAX_ORDER).contains(&n) {
+            return Err(Error::param("n", n, format!("must be in [2, {MAX_ORDER}]")).into());
+        }
+        let p = &self.0.paths[i][n - 2];
+        let a = Array2::from_shape_fn((p.len() / (2 * n), 2 * n), |(k, c)| p[k * 2 * n + c]);
         Ok(a.into_pyarray(py))
     }
 
@@ -100,16 +119,32 @@ impl PyPathBank {
             .collect()
     }
 
-    /// The order-2 table for index `eta` (`inf` for a perfect conductor); `reciprocal=False`
-    /// skips the reciprocity mean (the kernel estimate alone, a diagnostic).
-    #[pyo3(signature = (eta, reciprocal=true))]
-    fn table(&self, py: Python<'_>, eta: C64, reciprocal: bool) -> PyResult<PyOrderTable> {
+    /// The table of the paths of orders `orders = (first, last)` (within `2..=8`) for index
+    /// `eta` (`inf` for a perfect conductor); `reciprocal=False` skips the reciprocity mean
+    /// (the kernel estimate alone, a diagnostic).
+    #[pyo3(signature = (eta, orders=(2, 2), reciprocal=true))]
+    fn table(
+        &self,
+        py: Python<'_>,
+        eta: C64,
+        orders: (usize, usize),
+        reciprocal: bool,
+    ) -> PyResult<PyOrderTable> {
         let eta = parse_eta(eta)?;
+        let (a, b) = orders;
+        if !(2 <= a && a <= b && b <= MAX_ORDER) {
+            return Err(Error::param(
+                "orders",
+                format!("{orders:?}"),
+                format!("must be (first, last) with 2 <= first <= last <= {MAX_ORDER}"),
+            )
+            .into());
+        }
         Ok(PyOrderTable(py.detach(|| {
             if reciprocal {
-                OrderTable::build(&self.0, eta)
+                OrderTable::build(&self.0, eta, a..=b)
             } else {
-                OrderTable::spread(&self.0, eta)
+                OrderTable::spread(&self.0, eta, a..=b)
             }
         })))
     }
