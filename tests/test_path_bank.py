@@ -49,3 +49,36 @@ def test_bad_input_names_the_parameter(bank) -> None:
         bank.table(2.0, orders=(1, 3))
     with pytest.raises(pprender.Error, match="shape"):
         bank.table(2.0).eval(np.zeros((2, 3)), np.zeros((3, 3)))
+
+
+def test_material_with_surface_orders() -> None:
+    """``orders="surface"``: the material evaluates, is reciprocal, closes the white furnace,
+    round-trips its parameters, and the renderer refuses it with the parameter named.
+    (Few rays: the bookkeeping, not the physics, which src/brdf/bank/tests.rs checks.)"""
+    kw = dict(alpha=0.8, terms=("single", "double", "multiple"), orders="surface", bank_rays=20_000)
+    m = pprender.Material("beckmann", eta=complex("inf"), **kw)
+    assert m.orders == "surface" and m.bank_rays == 20_000
+    for deg in (0.0, 40.0, 80.0):
+        wi = np.array([[np.sin(np.radians(deg)), 0.0, np.cos(np.radians(deg))]])
+        assert abs(pprender.albedo(m, wi)[0] - 1.0) < 1e-4
+    al = pprender.Material("beckmann", eta=0.2 + 3.4j, **kw)
+    wi = np.array([[0.3, 0.1, 0.948683]]) / np.linalg.norm([0.3, 0.1, 0.948683])
+    wo = np.array([[-0.2, 0.4, 0.894427]]) / np.linalg.norm([-0.2, 0.4, 0.894427])
+    a, b = pprender.brdf(al, wi, wo), pprender.brdf(al, wo, wi)
+    c = np.diag([1.0, 1.0, -1.0, 1.0])
+    assert np.allclose(b[0], c @ a[0].T @ c, rtol=1e-10, atol=1e-14)
+    # the seed's double differs from the surface's (here 0.64x at normal backscatter)
+    seed = pprender.Material("beckmann", eta=0.2 + 3.4j, alpha=0.8, terms=("double",), coherent_backscatter=False)
+    surf = pprender.Material("beckmann", eta=0.2 + 3.4j, alpha=0.8, terms=("double",), coherent_backscatter=False,
+                             orders="surface", bank_rays=20_000)
+    z = np.array([[0.0, 0.0, 1.0]])
+    assert pprender.brdf(surf, z, z)[0, 0, 0] > 1.2 * pprender.brdf(seed, z, z)[0, 0, 0]
+    with pytest.raises(pprender.Error, match="orders"):
+        pprender.Material("beckmann", alpha=0.5, orders="triple")
+    with pytest.raises(pprender.Error, match="orders"):
+        pprender.Material("ggx", alpha=0.5, orders="surface", bank_rays=20_000)
+    with pytest.raises(pprender.Error, match="alpha"):
+        pprender.Material("beckmann", alpha=0.1, orders="surface", bank_rays=20_000)
+    scene = pprender.Scene(pprender.models.sphere(0.5, 2), al)
+    with pytest.raises(pprender.Error, match="orders"):
+        pprender.render(scene, pprender.Lidar(resolution=16), np.array([[1.0, 0.0, 0.0, 0.0]]))

@@ -136,12 +136,40 @@ pub struct PathBank {
     pub truncated: Vec<f64>,
     /// Rays lost by the traversal (numerical failures; expected 0).
     pub lost: u64,
+    /// `weights[node][n - 2]`: the flux each kept order-`n` path stands for, in units of one
+    /// primary ray's (1, or more after [`PathBank::thin`]).
+    pub weights: Vec<[f64; MAX_ORDER - 1]>,
 }
 
 impl PathBank {
     /// The order-`n` paths of node `i`, each the `2 n` slopes of its facets.
     pub fn paths_of(&self, i: usize, n: usize) -> std::slice::ChunksExact<'_, f32> {
         self.paths[i][n - 2].chunks_exact(2 * n)
+    }
+
+    /// Keep at most about `cap` paths per node and order (every `k`-th, each then standing
+    /// for `count / kept` rays): the memory of a bank whose noise is already below what
+    /// the table's kernel resolves.
+    pub fn thin(&mut self, cap: usize) {
+        let cap = cap.max(1);
+        for (node, w) in self.paths.iter_mut().zip(&mut self.weights) {
+            for (k, p) in node.iter_mut().enumerate() {
+                let len = 2 * (k + 2);
+                let count = p.len() / len;
+                if count <= cap {
+                    continue;
+                }
+                let stride = count.div_ceil(cap);
+                let kept: Vec<f32> = p
+                    .chunks_exact(len)
+                    .step_by(stride)
+                    .flatten()
+                    .copied()
+                    .collect();
+                w[k] *= count as f64 / (kept.len() / len) as f64;
+                *p = kept;
+            }
+        }
     }
 }
 
@@ -293,6 +321,7 @@ impl PathBank {
             albedo,
             truncated,
             lost,
+            weights: vec![[1.0; MAX_ORDER - 1]; N_THETA],
         })
     }
 }
@@ -381,8 +410,11 @@ impl OrderTable {
                 let mut sums = vec![[[0.0; 4]; 4]; N_THETA * N_PHI];
                 let mut pole = [[0.0; 4]; 4];
                 let mut hs = [V3::Z; MAX_ORDER];
-                let all = orders.clone().flat_map(|n| bank.paths_of(i, n));
-                for p in all {
+                let all = orders.clone().flat_map(|n| {
+                    bank.paths_of(i, n)
+                        .map(move |p| (p, bank.weights[i][n - 2]))
+                });
+                for (p, weight) in all {
                     let n = p.len() / 2;
                     let mut wo = neg(wi);
                     for (h, q) in hs.iter_mut().zip(p.chunks_exact(2)) {
@@ -408,7 +440,10 @@ impl OrderTable {
                     let Some(j) = path_jones(eta, wi, &hs[..n], bases) else {
                         continue;
                     };
-                    let m = jones_to_mueller(&j);
+                    let mut m = jones_to_mueller(&j);
+                    if weight != 1.0 {
+                        m.iter_mut().flatten().for_each(|x| *x *= weight);
+                    }
                     let theta = wo[2].clamp(-1.0, 1.0).acos();
                     let phi = sp.atan2(cp).clamp(0.0, PI);
                     let u = theta / THETA_STEP;
@@ -527,6 +562,53 @@ impl OrderTable {
             m = change_bases(&m, beam_bases(Frame::Sp, wi, wo), beam_bases(frame, wi, wo));
         }
         m
+    }
+
+    /// The directional albedo of the interpolated table at incidence node `i` for
+    /// unpolarized light, `int M00 cos(theta_o) d omega_o` over the hemisphere, the
+    /// table bilinear in `(theta_o, phi)` within each cell (constant beyond the last node):
+    /// Gauss-Legendre, 4 x 4 points per cell. Between incidence nodes the table's albedo
+    /// is the linear interpolation of these (the interpolation weights in `theta_i` do not
+    /// depend on `wo`).
+    pub fn interpolated_albedo(&self, i: usize) -> f64 {
+        let dphi = PI / (N_PHI - 1) as f64;
+        let g = [
+            (-0.861_136_311_594_052_6, 0.347_854_845_137_453_9),
+            (-0.339_981_043_584_856_3, 0.652_145_154_862_546_1),
+            (0.339_981_043_584_856_3, 0.652_145_154_862_546_1),
+            (0.861_136_311_594_052_6, 0.347_854_845_137_453_9),
+        ];
+        let m00 = |o: usize, j: usize| self.data[(i * N_THETA + o) * N_PHI + j][0][0];
+        let mut s = 0.0;
+        for o in 0..N_THETA {
+            let (t0, t1) = (
+                o as f64 * THETA_STEP,
+                ((o + 1) as f64 * THETA_STEP).min(0.5 * PI),
+            );
+            for j in 0..N_PHI - 1 {
+                for (xt, wt) in g {
+                    let u = 0.5 * (xt + 1.0);
+                    let t = t0 + u * (t1 - t0);
+                    let jac_t = 0.5 * (t1 - t0) * t.sin() * t.cos();
+                    for (xp, wp) in g {
+                        let v = 0.5 * (xp + 1.0);
+                        let (lo, hi) = if o + 1 < N_THETA {
+                            (
+                                (1.0 - v) * m00(o, j) + v * m00(o, j + 1),
+                                (1.0 - v) * m00(o + 1, j) + v * m00(o + 1, j + 1),
+                            )
+                        } else {
+                            let c = (1.0 - v) * m00(o, j) + v * m00(o, j + 1);
+                            (c, c)
+                        };
+                        let f = (1.0 - u) * lo + u * hi;
+                        s += wt * wp * f * jac_t * 0.5 * dphi;
+                    }
+                }
+            }
+        }
+        // both halves of the circle
+        2.0 * s
     }
 
     /// The directional albedo of the table at incidence node `i` for unpolarized light,

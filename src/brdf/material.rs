@@ -1,6 +1,8 @@
 //! [`Material`]: a validated [`MaterialSpec`] on its [`Surface`], with the tables the
 //! terms need derived from them (albedos, escape after a bounce).
 
+use super::orders::{Part, SurfaceOrders};
+use super::spec::Orders;
 pub use super::spec::{MaterialSpec, Term, Terms};
 pub use super::surface::Surface;
 use crate::microfacet::masking::ZTable;
@@ -111,6 +113,9 @@ pub struct Material {
     pub(crate) s_white: Option<(ZTable, ZTable)>,
     /// The same with the unpolarized Fresnel reflectance.
     pub(crate) s_fresnel: Option<(ZTable, ZTable)>,
+    /// With `orders = Surface` and "double" or "multiple" on: the path banks' orders
+    /// ([`super::orders`]).
+    pub surface_orders: Option<std::sync::Arc<SurfaceOrders>>,
 }
 
 impl std::ops::Deref for Material {
@@ -238,6 +243,26 @@ impl Material {
         {
             return Err(Error::param("masking", "\"seed\"", "the seed's closed form exists for shadowing=\"aps\" with distribution=\"blinn_phong\" only"));
         }
+        let surface_orders =
+            if spec.orders == Orders::Surface && (spec.terms.double || spec.terms.multiple) {
+                let Distribution::Beckmann { alpha } = spec.distribution else {
+                    return Err(Error::param(
+                        "orders",
+                        "\"surface\"",
+                        "the path banks are of Gaussian-correlated Beckmann surfaces: use \
+                     distribution=\"beckmann\" (or orders=\"seed\")",
+                    ));
+                };
+                Some(std::sync::Arc::new(SurfaceOrders::new(
+                    alpha,
+                    spec.eta,
+                    spec.terms.double,
+                    spec.terms.multiple,
+                    spec.bank_rays,
+                )?))
+            } else {
+                None
+            };
         let mut mat = Material {
             surface: Surface::new(spec),
             e_white: None,
@@ -245,6 +270,7 @@ impl Material {
             e_spec: None,
             s_white: None,
             s_fresnel: None,
+            surface_orders,
         };
         let needs_albedo = mat.spec.terms.multiple || mat.spec.terms.diffuse;
         let exact = mat.spec.masking == MaskingEval::Exact;
@@ -256,7 +282,7 @@ impl Material {
         if exact {
             builder.spec.masking = MaskingEval::Table;
         }
-        if mat.spec.terms.double {
+        if mat.spec.terms.double && mat.surface_orders.is_none() {
             builder.s_white = Some(builder.escape_table(false));
             builder.s_fresnel = Some(builder.escape_table(true));
         }
@@ -312,8 +338,14 @@ impl Material {
                     eval_escape(st, u)
                 });
             }
+            if fresnel {
+                // the banks' orders with the material's Fresnel (the white table leaves them
+                // out: [`Material::e_white_total`] adds them exactly, piecewise linear in
+                // theta as the tables are, which a cubic in z would round at the kinks)
+                v += self.bank_albedo(c, true);
+            }
             if let Some(w) = ms {
-                v += (1.0 - w.e.eval(c, theta.sin())).max(0.0) * f_ms;
+                v += (1.0 - self.e_white_total(w, c, theta.sin(), None)).max(0.0) * f_ms;
             }
             v
         };
@@ -325,9 +357,14 @@ impl Material {
             fresnel_scale: s_f,
         };
         // 1 - E_avg directly (it is ~alpha^2 for smooth surfaces: forming E_avg first
-        // would leave only its rounding)
+        // would leave only its rounding); the white E with the banks' orders
         let deficit = average_over_cosine(n, node, |c, s| {
-            1.0 - table.eval_csz(c, s, z_scaled(scale, c, s))
+            let bank = if fresnel {
+                0.0
+            } else {
+                self.bank_albedo(c, false)
+            };
+            1.0 - table.eval_csz(c, s, z_scaled(scale, c, s)) - bank
         });
         AlbedoTable {
             e_avg: 1.0 - deficit,
@@ -360,10 +397,34 @@ impl Material {
     /// Double-bounce albedo for unpolarized light at `wi`, with the unpolarized Fresnel
     /// product (see [`super::double::double_albedo`]), by an `n x n` quadrature over `h1`.
     pub fn double_albedo(&self, wi: V3, n: usize) -> f64 {
+        if let Some(so) = &self.surface_orders {
+            return so.albedo(Part::Double, true, wi[2]);
+        }
         match &self.s_fresnel {
             Some(st) => super::double::double_albedo(self, wi, true, n, &|u| eval_escape(st, u)),
             None => 0.0,
         }
+    }
+
+    /// The albedo of the path banks' orders at incidence cosine `c` (0 without them), with
+    /// the material's Fresnel or with `F = 1`.
+    #[inline]
+    pub fn bank_albedo(&self, c: f64, fresnel: bool) -> f64 {
+        self.surface_orders.as_ref().map_or(0.0, |so| {
+            so.albedo(Part::Double, fresnel, c) + so.albedo(Part::Rest, fresnel, c)
+        })
+    }
+
+    /// The white (`F = 1`) albedo `E` the multiple term completes to 1: the table `t`
+    /// (single, and the seed's double) plus the banks' orders; `z` the material coordinate
+    /// when known.
+    #[inline]
+    fn e_white_total(&self, t: &AlbedoTable, c: f64, s: f64, z: Option<f64>) -> f64 {
+        let e = match z {
+            Some(z) => t.e.eval_z(z),
+            None => t.e.eval(c, s),
+        };
+        e + self.bank_albedo(c, false)
     }
 
     /// `E(theta)` of the white (F = 1) single-bounce term, if tabulated.
@@ -374,7 +435,24 @@ impl Material {
     /// Multiple-scattering value `f_ms(wi, wo)` (1/sr) from cosines/sines of both directions.
     #[inline]
     pub fn multiple(&self, ci: f64, si: f64, co: f64, so: f64) -> f64 {
-        self.multiple_z(self.z_of(ci, si), self.z_of(co, so))
+        self.multiple_cz(ci, self.z_of(ci, si), co, self.z_of(co, so))
+    }
+
+    /// [`Self::multiple`] from the cosines and table coordinates of both directions (the
+    /// banks' albedos are in `theta`).
+    #[inline]
+    pub fn multiple_cz(&self, ci: f64, zi: f64, co: f64, zo: f64) -> f64 {
+        if self.surface_orders.is_none() {
+            return self.multiple_z(zi, zo);
+        }
+        let t = self.e_white.as_ref().expect("multiple term enabled");
+        let denom = std::f64::consts::PI * (1.0 - t.e_avg);
+        if denom <= 1e-14 {
+            return 0.0;
+        }
+        let a = (1.0 - self.e_white_total(t, ci, 0.0, Some(zi))).max(0.0);
+        let b = (1.0 - self.e_white_total(t, co, 0.0, Some(zo))).max(0.0);
+        self.f_ms * a * b / denom
     }
 
     /// [`Self::multiple`] from the table coordinates of both directions.
@@ -415,7 +493,7 @@ impl Material {
         let ms = if self.spec.terms.multiple {
             let t = self.e_white.as_ref().unwrap();
             if t.e_avg < 1.0 - 1e-14 {
-                (1.0 - t.e.eval(c, s)).max(0.0) * self.f_ms
+                (1.0 - self.e_white_total(t, c, s, None)).max(0.0) * self.f_ms
             } else {
                 0.0
             }

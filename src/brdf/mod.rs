@@ -22,6 +22,7 @@ pub mod albedo;
 pub mod bank;
 pub mod double;
 pub mod material;
+pub mod orders;
 pub mod single;
 pub mod spec;
 pub mod surface;

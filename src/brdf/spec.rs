@@ -108,6 +108,41 @@ impl Terms {
     }
 }
 
+/// Where the orders >= 2 of a material come from (decided once per material, never per
+/// direction).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Orders {
+    /// The seed's formulation: the double term's quadrature with uncorrelated second facets
+    /// ([`super::double`]) and the depolarizing multiple term standing for orders 3+.
+    Seed,
+    /// The paths of a Gaussian-correlated Beckmann surface ([`super::bank`]): order 2 and,
+    /// under "multiple", the orders beyond the enabled ones, polarized, plus a depolarizing
+    /// remainder that closes the energy balance.
+    Surface,
+}
+
+impl Orders {
+    pub fn name(self) -> &'static str {
+        match self {
+            Orders::Seed => "seed",
+            Orders::Surface => "surface",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Result<Orders> {
+        match name {
+            "seed" => Ok(Orders::Seed),
+            "surface" => Ok(Orders::Surface),
+            other => Err(Error::param(
+                "orders",
+                format!("{other:?}"),
+                "expected \"seed\" (the double term and the depolarizing multiple term) or \
+                 \"surface\" (the path bank of a Gaussian-correlated Beckmann surface)",
+            )),
+        }
+    }
+}
+
 /// Everything a user specifies; [`Material::new`](super::material::Material::new) validates it and builds the tables.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MaterialSpec {
@@ -131,6 +166,10 @@ pub struct MaterialSpec {
     pub wavelength: f64,
     /// Surface correlation length (m): rms lateral separation of the two facets.
     pub correlation_length: f64,
+    /// Where orders >= 2 come from.
+    pub orders: Orders,
+    /// With [`Orders::Surface`]: primary rays per incidence node of each path bank.
+    pub bank_rays: u64,
 }
 
 impl MaterialSpec {
@@ -156,6 +195,8 @@ impl MaterialSpec {
             double_correlated: true,
             wavelength: Self::WAVELENGTH,
             correlation_length: Self::CORRELATION_LENGTH,
+            orders: Orders::Seed,
+            bank_rays: Self::BANK_RAYS,
         }
     }
 
@@ -167,6 +208,9 @@ impl MaterialSpec {
     pub const DOUBLE_ORDER: usize = 160;
     pub const WAVELENGTH: f64 = 1064e-9;
     pub const CORRELATION_LENGTH: f64 = 10e-6;
+    /// Primary rays per incidence node of a path bank (`scripts/bank_vs_surface.py`: 4e6
+    /// gives the order-2 values within the reference's noise at alpha 0.5 and 0.8).
+    pub const BANK_RAYS: u64 = 4_000_000;
 }
 
 #[cfg(test)]

@@ -5,8 +5,9 @@
 //! [`super::double`], [`super::albedo`](mod@super::albedo)) and the [`Material`] built on them.
 
 use super::albedo::single_albedo;
-use super::double::eval_double_framed;
+use super::double::{cbe_gamma, eval_double_framed};
 use super::material::Material;
+use super::orders::Part;
 use super::single::single_term;
 use super::spec::Term;
 use crate::optics::frames::{Frame, V3};
@@ -36,19 +37,44 @@ pub fn sum_terms_except(mat: &Material, wi: V3, wo: V3, frame: Frame, skip: Opti
             // first in Term::ALL: it starts the sum (m is still zero; assigned, so that the
             // signs of its zeros are kept)
             Term::Single => m = single_term(mat, wi, wo, si, so, zi, zo, frame),
-            Term::Double => {
-                let m2 = eval_double_framed(mat, wi, wo, frame);
-                for (row, r2) in m.iter_mut().zip(m2.iter()) {
-                    for (x, y) in row.iter_mut().zip(r2.iter()) {
-                        *x += y;
-                    }
+            Term::Double => add(&mut m, &double_term(mat, wi, wo, frame)),
+            Term::Multiple => {
+                if let Some(so) = &mat.surface_orders {
+                    add(&mut m, &so.eval(Part::Rest, wi, wo, frame));
                 }
+                m[0][0] += mat.multiple_cz(ci, zi, co, zo)
             }
-            Term::Multiple => m[0][0] += mat.multiple_z(zi, zo),
             Term::Diffuse => m[0][0] += mat.diffuse_z(ci, si, zi, co, so, zo),
         }
     }
     m
+}
+
+fn add(m: &mut Mat4, b: &Mat4) {
+    for (row, r2) in m.iter_mut().zip(b.iter()) {
+        for (x, y) in row.iter_mut().zip(r2.iter()) {
+            *x += y;
+        }
+    }
+}
+
+/// The double term: the seed's quadrature ([`eval_double_framed`]), or with
+/// `orders = Surface` the path bank's order 2 times `1 + gamma`, its coherent backscatter
+/// (an order-2 backscatter path and its reverse have the same Jones matrix in
+/// backscatter-aligned frames, so the pair's interference adds `gamma` times the
+/// incoherent value in every element; `gamma` as in [`crate::brdf::double::cbe_gamma`]).
+pub fn double_term(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
+    match &mat.surface_orders {
+        None => eval_double_framed(mat, wi, wo, frame),
+        Some(so) => {
+            let mut m = so.eval(Part::Double, wi, wo, frame);
+            if mat.spec.coherent_backscatter {
+                let g = cbe_gamma(mat.spec.wavelength, mat.spec.correlation_length, wi, wo);
+                m.iter_mut().flatten().for_each(|x| *x *= 1.0 + g);
+            }
+            m
+        }
+    }
 }
 
 /// Directional albedo of one term of `mat` for unpolarized light at incidence `(ci, si)`:
@@ -59,7 +85,13 @@ fn term_albedo(mat: &Material, term: Term, ci: f64, si: f64, n: usize) -> f64 {
     match term {
         Term::Single => single_albedo(mat, ci, true, n),
         Term::Double => mat.double_albedo(V3::new(si, 0.0, ci), n.min(128)),
-        Term::Multiple => mat.depolarizing_albedo(ci, si).0,
+        Term::Multiple => {
+            let rest = mat
+                .surface_orders
+                .as_ref()
+                .map_or(0.0, |so| so.albedo(Part::Rest, true, ci));
+            mat.depolarizing_albedo(ci, si).0 + rest
+        }
         Term::Diffuse => mat.depolarizing_albedo(ci, si).1,
     }
 }

@@ -43,6 +43,8 @@ mod material_args {
     arg!(double_masking, name, String);
     arg!(wavelength, real, f64);
     arg!(correlation_length, real, f64);
+    arg!(orders, name, String);
+    arg!(bank_rays, count, usize);
 }
 
 /// A polarized microfacet material.
@@ -51,7 +53,8 @@ mod material_args {
 ///          shadowing="aps", correlation=None, smith_g1="exact", masking="table",
 ///          terms=("single", "multiple"), diffuse_albedo=0.0, name=None,
 ///          double_order=160, coherent_backscatter=True, double_masking="seed",
-///          wavelength=1.064e-6, correlation_length=1e-5)
+///          wavelength=1.064e-6, correlation_length=1e-5, orders="seed",
+///          bank_rays=4000000)
 ///
 /// distribution: "blinn_phong" (roughness exponent ``m`` in [0, 1e10]; m = 0 is
 ///     Lambertian-like, m -> inf a mirror), "beckmann" or "ggx" (``alpha`` in
@@ -87,6 +90,15 @@ mod material_args {
 ///     hit/escape probabilities: seed eq. 17, made reciprocal) or "uncorrelated".
 /// wavelength: the wavelength (m) ``eta`` is for; :func:`pprender.render` refuses a
 ///     sensor at another wavelength. pprender.materials.get sets it.
+/// orders: where orders >= 2 come from: "seed" (the double term above and the
+///     depolarizing multiple term) or "surface" (Beckmann only, alpha in [0.3, 1]: the
+///     paths of Gaussian-correlated surfaces, src/brdf/bank.rs; "double" is order 2,
+///     "multiple" the orders beyond the enabled ones, polarized, plus a depolarizing
+///     remainder that closes the energy balance). Against the explicit surface, order 2
+///     is within 0.92-1.16 where the double term is 0.27-2.75 (CHANGELOG, issue 24). Its
+///     path banks are traced on first use (tens of seconds per alpha node) and kept for
+///     the process; the renderer's tables do not carry them yet (render() refuses).
+/// bank_rays: primary rays per incidence node of each path bank (orders="surface").
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise
 /// pprender.Error naming the parameter.
@@ -116,12 +128,13 @@ impl PyMaterial {
         terms=vec!["single".to_string(), "multiple".to_string()], diffuse_albedo=0.0, name=None,
         double_order=MaterialSpec::DOUBLE_ORDER, coherent_backscatter=true,
         double_masking=String::from("seed"),
-        wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH),
+        wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH,
+        orders=String::from("seed"), bank_rays=MaterialSpec::BANK_RAYS as usize),
         text_signature = "(distribution='blinn_phong', *, m=None, alpha=None, eta=(1.5+0j), \
 shadowing='aps', correlation=None, smith_g1='exact', masking='table', \
 terms=('single', 'multiple'), diffuse_albedo=0.0, name=None, double_order=160, \
 coherent_backscatter=True, double_masking='seed', wavelength=1.064e-06, \
-correlation_length=1e-05)")]
+correlation_length=1e-05, orders='seed', bank_rays=4000000)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -141,6 +154,8 @@ correlation_length=1e-05)")]
         #[pyo3(from_py_with = material_args::double_masking)] double_masking: String,
         #[pyo3(from_py_with = material_args::wavelength)] wavelength: f64,
         #[pyo3(from_py_with = material_args::correlation_length)] correlation_length: f64,
+        #[pyo3(from_py_with = material_args::orders)] orders: String,
+        #[pyo3(from_py_with = material_args::bank_rays)] bank_rays: usize,
     ) -> PyResult<Self> {
         let (distribution, shadowing, smith_g1, masking, double_masking) = (
             distribution.as_str(),
@@ -174,6 +189,8 @@ correlation_length=1e-05)")]
             },
             wavelength,
             correlation_length,
+            orders: crate::brdf::spec::Orders::from_name(&orders)?,
+            bank_rays: bank_rays as u64,
         };
         let inner = py.detach(|| core_brdf::Material::new(spec))?;
         let dist_name = match dist {
@@ -269,6 +286,14 @@ correlation_length=1e-05)")]
     #[getter]
     fn wavelength(&self) -> f64 {
         self.inner.spec.wavelength
+    }
+    #[getter]
+    fn orders(&self) -> &'static str {
+        self.inner.spec.orders.name()
+    }
+    #[getter]
+    fn bank_rays(&self) -> u64 {
+        self.inner.spec.bank_rays
     }
     #[getter]
     fn correlation_length(&self) -> f64 {
@@ -523,6 +548,14 @@ fn monostatic_table<'py>(
         );
     }
     let mat = material.inner.clone();
+    if mat.surface_orders.is_some() {
+        return Err(crate::Error::param(
+            "orders",
+            "\"surface\"",
+            "the monostatic double-bounce table tabulates the seed's double term: use orders=\"seed\"",
+        )
+        .into());
+    }
     let (table, secs, err) = py.detach(move || {
         let t0 = std::time::Instant::now();
         let table = crate::brdf::table::MonostaticTable::build(&mat, nodes, double_order);

@@ -147,6 +147,8 @@ def _material_params(m: Material) -> dict[str, Any]:
         "double_masking": m.double_masking,
         "wavelength": _num(m.wavelength),
         "correlation_length": _num(m.correlation_length),
+        "orders": m.orders,
+        "bank_rays": int(m.bank_rays),
     }
     if m.distribution == "blinn_phong":
         d["m"] = _num(m.m)  # type: ignore[arg-type]

@@ -221,6 +221,8 @@ def _material_with(m: Material, alpha: float | None, eta: complex | None) -> Mat
         double_masking=m.double_masking,
         wavelength=m.wavelength,
         correlation_length=m.correlation_length,
+        orders=m.orders,
+        bank_rays=m.bank_rays,
     )
     if alpha is not None:
         kw["alpha"] = alpha

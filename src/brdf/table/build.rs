@@ -241,6 +241,15 @@ impl BrdfTable {
                 "must be in [0, pi/2) radians",
             ));
         }
+        if mat.surface_orders.is_some() {
+            return Err(Error::param(
+                "orders",
+                "\"surface\"",
+                "the renderer's tables do not carry the path banks' orders yet (issue 24): \
+                 render this material with orders=\"seed\", or with the f64 reference \
+                 renderer",
+            ));
+        }
         let (grids, frame) = opts.resolve(mat, beta)?;
         let mut parts = vec![];
         let mut kinds = vec![];

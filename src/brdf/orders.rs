@@ -1,0 +1,266 @@
+//! A material's orders >= 2 from path banks ([`super::bank`]) at roughness nodes,
+//! interpolated in alpha: the data behind [`super::spec::Orders::Surface`].
+//!
+//! For each alpha node (`ALPHA_NODES`) a bank is traced once per process (64 Gaussian
+//! surfaces, `MaterialSpec::bank_rays` primary rays per incidence node; thinned to
+//! `PATH_CAP` paths per node and order) and each material's tables are built from it: the
+//! order-2 table when "double" is on, and the table of the orders beyond the enabled ones
+//! (3..=8 with "double", 2..=8 without) when "multiple" is on; plus, per incidence node,
+//! their albedos with the material's Fresnel and with `F = 1` (from perfect-conductor
+//! tables), which the multiple term's depolarizing remainder and the diffuse layer need.
+//! A material between two nodes takes the linear interpolation in alpha of the two nodes'
+//! tables and albedos (tables and albedos alike, so the energy balance holds at any alpha).
+//!
+//! Both caches (banks, node tables) live for the process; a new index `eta` at a cached
+//! node costs only its tables (about a second), a new node its bank (tens of seconds on 2
+//! cores at the default rays).
+
+use super::bank::{BankSpec, OrderTable, PathBank, MAX_ORDER, N_THETA, THETA_STEP};
+use crate::optics::frames::{Frame, V3};
+use crate::optics::fresnel::Eta;
+use crate::optics::mueller::Mat4;
+use crate::{Error, Result};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// The roughness nodes of the path banks (Beckmann alpha).
+pub const ALPHA_NODES: [f64; 8] = [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0];
+/// Paths kept per incidence node and order ([`PathBank::thin`]).
+pub const PATH_CAP: usize = 300_000;
+/// Banks kept in memory at once (each up to a few hundred MB).
+const BANKS_KEPT: usize = 2;
+/// Surfaces per bank.
+const SURFACES: u32 = 64;
+
+/// What the material asks of one node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+struct NodeKey {
+    node: usize,
+    rays: u64,
+    /// `(re, im)` bits, or `None` for a perfect conductor.
+    eta: Option<(u64, u64)>,
+    double: bool,
+    multiple: bool,
+}
+
+/// One node's tables for one material.
+#[derive(Debug)]
+struct NodeTables {
+    double: Option<OrderTable>,
+    rest: Option<OrderTable>,
+    /// Per incidence node: albedo of `double`, `rest` with the material's Fresnel.
+    fresnel: [Vec<f64>; 2],
+    /// The same with `F = 1`.
+    white: [Vec<f64>; 2],
+}
+
+/// The banks kept, by `(node, rays)`, oldest first.
+type Banks = Mutex<Vec<((usize, u64), Arc<PathBank>)>>;
+
+fn banks() -> &'static Banks {
+    static B: OnceLock<Banks> = OnceLock::new();
+    B.get_or_init(|| Mutex::new(Vec::new()))
+}
+
+fn tables() -> &'static Mutex<HashMap<NodeKey, Arc<NodeTables>>> {
+    static T: OnceLock<Mutex<HashMap<NodeKey, Arc<NodeTables>>>> = OnceLock::new();
+    T.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+fn bank(node: usize, rays: u64) -> Result<Arc<PathBank>> {
+    let key = (node, rays);
+    // held while tracing: concurrent builders of the same bank wait for one trace
+    let mut kept = banks().lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, b)) = kept.iter().find(|(k, _)| *k == key) {
+        return Ok(b.clone());
+    }
+    let mut b = PathBank::trace(&BankSpec {
+        alpha: ALPHA_NODES[node],
+        grid: 256,
+        correlation_length: 8.0,
+        rays,
+        surfaces: SURFACES.min(rays as u32),
+        seed: 1,
+    })?;
+    b.thin(PATH_CAP);
+    let b = Arc::new(b);
+    if kept.len() >= BANKS_KEPT {
+        kept.remove(0);
+    }
+    kept.push((key, b.clone()));
+    Ok(b)
+}
+
+fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
+    if let Some(t) = tables().lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        return Ok(t.clone());
+    }
+    let b = bank(key.node, key.rays)?;
+    let first_rest = if key.double { 3 } else { 2 };
+    let build = |eta: Eta, on: bool, orders: std::ops::RangeInclusive<usize>| {
+        on.then(|| OrderTable::build(&b, eta, orders))
+    };
+    let albedos = |t: &Option<OrderTable>| -> Vec<f64> {
+        match t {
+            Some(t) => (0..N_THETA).map(|i| t.interpolated_albedo(i)).collect(),
+            None => vec![0.0; N_THETA],
+        }
+    };
+    let double = build(eta, key.double, 2..=2);
+    let rest = build(eta, key.multiple, first_rest..=MAX_ORDER);
+    let fresnel = [albedos(&double), albedos(&rest)];
+    let white = if key.eta.is_none() {
+        fresnel.clone()
+    } else {
+        let wd = build(Eta::PerfectConductor, key.double, 2..=2);
+        let wr = build(Eta::PerfectConductor, key.multiple, first_rest..=MAX_ORDER);
+        [albedos(&wd), albedos(&wr)]
+    };
+    let t = Arc::new(NodeTables {
+        double,
+        rest,
+        fresnel,
+        white,
+    });
+    tables()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(key, t.clone());
+    Ok(t)
+}
+
+/// The orders >= 2 of one material (module docs).
+#[derive(Debug, Clone)]
+pub struct SurfaceOrders {
+    /// Order 2 (with "double").
+    pub double: Option<OrderTable>,
+    /// The orders beyond the enabled ones (with "multiple").
+    pub rest: Option<OrderTable>,
+    fresnel: [Vec<f64>; 2],
+    white: [Vec<f64>; 2],
+}
+
+/// Which part's albedo.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Part {
+    Double,
+    Rest,
+}
+
+impl SurfaceOrders {
+    /// The tables of a Beckmann material of roughness `alpha` and index `eta` (module
+    /// docs). `alpha` must lie within the nodes.
+    pub fn new(alpha: f64, eta: Eta, double: bool, multiple: bool, rays: u64) -> Result<Self> {
+        let (lo, hi) = (ALPHA_NODES[0], ALPHA_NODES[ALPHA_NODES.len() - 1]);
+        if !(alpha >= lo && alpha <= hi) {
+            return Err(Error::param(
+                "alpha",
+                alpha,
+                format!(
+                    "orders=\"surface\" has path banks for Beckmann alpha in [{lo}, {hi}] \
+                     (below {lo}, orders >= 2 are small except near grazing; use orders=\"seed\")"
+                ),
+            ));
+        }
+        if !(1_000..=1u64 << 32).contains(&rays) {
+            return Err(Error::param("bank_rays", rays, "must be in [1000, 2^32]"));
+        }
+        let k = ALPHA_NODES
+            .iter()
+            .position(|&a| a >= alpha)
+            .unwrap_or(ALPHA_NODES.len() - 1);
+        let (k0, w) = if ALPHA_NODES[k] == alpha || k == 0 {
+            (k, 0.0)
+        } else {
+            (
+                k - 1,
+                (alpha - ALPHA_NODES[k - 1]) / (ALPHA_NODES[k] - ALPHA_NODES[k - 1]),
+            )
+        };
+        let eta_key = match eta {
+            Eta::PerfectConductor => None,
+            Eta::Complex(e) => Some((e.re.to_bits(), e.im.to_bits())),
+        };
+        let key = |node| NodeKey {
+            node,
+            rays,
+            eta: eta_key,
+            double,
+            multiple,
+        };
+        let a = node_tables(key(k0), eta)?;
+        if w == 0.0 {
+            return Ok(SurfaceOrders {
+                double: a.double.clone(),
+                rest: a.rest.clone(),
+                fresnel: a.fresnel.clone(),
+                white: a.white.clone(),
+            });
+        }
+        let b = node_tables(key(k0 + 1), eta)?;
+        let mix_t = |x: &Option<OrderTable>, y: &Option<OrderTable>| match (x, y) {
+            (Some(x), Some(y)) => Some(OrderTable {
+                data: x
+                    .data
+                    .iter()
+                    .zip(&y.data)
+                    .map(|(p, q)| {
+                        let mut m = [[0.0; 4]; 4];
+                        for r in 0..4 {
+                            for c in 0..4 {
+                                m[r][c] = (1.0 - w) * p[r][c] + w * q[r][c];
+                            }
+                        }
+                        m
+                    })
+                    .collect(),
+            }),
+            _ => None,
+        };
+        let mix_a = |x: &[Vec<f64>; 2], y: &[Vec<f64>; 2]| {
+            [0, 1].map(|p| {
+                x[p].iter()
+                    .zip(&y[p])
+                    .map(|(u, v)| (1.0 - w) * u + w * v)
+                    .collect::<Vec<f64>>()
+            })
+        };
+        Ok(SurfaceOrders {
+            double: mix_t(&a.double, &b.double),
+            rest: mix_t(&a.rest, &b.rest),
+            fresnel: mix_a(&a.fresnel, &b.fresnel),
+            white: mix_a(&a.white, &b.white),
+        })
+    }
+
+    /// The albedo of `part` at incidence cosine `c` (unpolarized), with the material's
+    /// Fresnel or with `F = 1`: linear in `theta` between the incidence nodes, as the
+    /// tables are (constant beyond the last node).
+    pub fn albedo(&self, part: Part, fresnel: bool, c: f64) -> f64 {
+        let a = if fresnel { &self.fresnel } else { &self.white };
+        let v = &a[match part {
+            Part::Double => 0,
+            Part::Rest => 1,
+        }];
+        let t = c.clamp(-1.0, 1.0).acos() / THETA_STEP;
+        let t = t.clamp(0.0, (N_THETA - 1) as f64);
+        let k = (t.floor() as usize).min(N_THETA - 2);
+        let f = t - k as f64;
+        (1.0 - f) * v[k] + f * v[k + 1]
+    }
+
+    /// `part`'s Mueller BRDF (1/sr) in `frame`; zero when the part is not enabled.
+    pub fn eval(&self, part: Part, wi: V3, wo: V3, frame: Frame) -> Mat4 {
+        let t = match part {
+            Part::Double => &self.double,
+            Part::Rest => &self.rest,
+        };
+        match t {
+            Some(t) => t.eval(wi, wo, frame),
+            None => [[0.0; 4]; 4],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,108 @@
+use super::*;
+use crate::brdf::{albedo, eval, Material, MaterialSpec, Terms};
+use crate::microfacet::Distribution;
+use crate::optics::fresnel::C64;
+use crate::optics::mueller::reciprocal;
+use crate::reference::rng::Rng;
+
+/// Few rays: these tests check the bookkeeping, not the bank's noise.
+const RAYS: u64 = 20_000;
+
+fn material(alpha: f64, eta: Eta, double: bool) -> Material {
+    let mut spec = MaterialSpec::new(Distribution::Beckmann { alpha }, eta);
+    spec.terms = Terms {
+        single: true,
+        double,
+        multiple: true,
+        diffuse: false,
+    };
+    spec.orders = crate::brdf::spec::Orders::Surface;
+    spec.bank_rays = RAYS;
+    Material::new(spec).unwrap()
+}
+
+/// White furnace: with `F = 1` single + the banks' orders + the depolarizing remainder
+/// return all the light, at a node (0.8) and between nodes (0.75), with and without
+/// "double", to 1e-4 (the albedo table's interpolation between its 256 nodes).
+#[test]
+fn white_furnace() {
+    for (alpha, double) in [(0.8, true), (0.75, true), (0.75, false)] {
+        let mat = material(alpha, Eta::PerfectConductor, double);
+        for deg in [0.0f64, 20.0, 45.0, 70.0, 85.0] {
+            let a = albedo(&mat, deg.to_radians().cos(), 128);
+            assert!(
+                (a - 1.0).abs() < 1e-4,
+                "alpha {alpha} double {double} {deg}: {a}"
+            );
+        }
+    }
+}
+
+/// Reciprocal: `f(wo, wi) = C f(wi, wo)^T C` (sp frames) for the whole BRDF, with the
+/// coherent backscatter's `gamma` symmetric in the two directions.
+#[test]
+fn reciprocal_between_nodes() {
+    let mat = material(0.75, Eta::Complex(C64::new(1.3, 2.1)), true);
+    let mut rng = Rng::new(3, &[]);
+    for _ in 0..50 {
+        let d = |rng: &mut Rng| {
+            let (t, p) = (1.4 * rng.uniform(), 6.283 * rng.uniform());
+            V3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
+        };
+        let (wi, wo) = (d(&mut rng), d(&mut rng));
+        let a = eval(&mat, wi, wo, Frame::Sp);
+        let b = reciprocal(&eval(&mat, wo, wi, Frame::Sp));
+        for r in 0..4 {
+            for c in 0..4 {
+                assert!((a[r][c] - b[r][c]).abs() <= 1e-12 * a[0][0], "{a:?} {b:?}");
+            }
+        }
+    }
+}
+
+/// Between nodes the tables are the linear interpolation in alpha of the nodes' tables.
+#[test]
+fn tables_interpolate_in_alpha() {
+    let eta = Eta::Complex(C64::new(1.5, 0.0));
+    let (a, b, m) = (
+        SurfaceOrders::new(0.7, eta, true, true, RAYS).unwrap(),
+        SurfaceOrders::new(0.8, eta, true, true, RAYS).unwrap(),
+        SurfaceOrders::new(0.725, eta, true, true, RAYS).unwrap(),
+    );
+    let (wi, wo) = (
+        V3::new(0.3, 0.1, 0.95).normalize(),
+        V3::new(-0.2, 0.4, 0.89).normalize(),
+    );
+    for part in [Part::Double, Part::Rest] {
+        let (x, y, z) = (
+            a.eval(part, wi, wo, Frame::Sp),
+            b.eval(part, wi, wo, Frame::Sp),
+            m.eval(part, wi, wo, Frame::Sp),
+        );
+        for r in 0..4 {
+            for c in 0..4 {
+                let want = 0.75 * x[r][c] + 0.25 * y[r][c];
+                assert!((z[r][c] - want).abs() <= 1e-12 * x[0][0].max(y[0][0]));
+            }
+        }
+        let want = 0.75 * a.albedo(part, true, 0.9) + 0.25 * b.albedo(part, true, 0.9);
+        assert!((m.albedo(part, true, 0.9) - want).abs() < 1e-14);
+    }
+}
+
+/// Refused with the parameter named: roughness outside the nodes, a non-Beckmann
+/// distribution, too few rays; and the renderer's tables refuse such a material.
+#[test]
+fn bad_input_names_the_parameter() {
+    let e = SurfaceOrders::new(0.1, Eta::PerfectConductor, true, true, RAYS).unwrap_err();
+    assert!(e.to_string().contains("alpha"), "{e}");
+    let e = SurfaceOrders::new(0.5, Eta::PerfectConductor, true, true, 10).unwrap_err();
+    assert!(e.to_string().contains("bank_rays"), "{e}");
+    let mut spec = MaterialSpec::new(Distribution::Ggx { alpha: 0.5 }, Eta::PerfectConductor);
+    spec.orders = crate::brdf::spec::Orders::Surface;
+    let e = Material::new(spec).unwrap_err();
+    assert!(e.to_string().contains("orders"), "{e}");
+    let mat = material(0.8, Eta::PerfectConductor, true);
+    let e = crate::brdf::table::BrdfTable::build(&mat, 0.0, &Default::default()).unwrap_err();
+    assert!(e.to_string().contains("orders"), "{e}");
+}
