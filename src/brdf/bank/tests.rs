@@ -151,6 +151,7 @@ fn order_two_backscatter_matches_the_explicit_surface() {
         frame: Frame::Sp,
         seed: 77,
         batches: 16,
+        coherent: None,
     })
     .unwrap();
     let (r, se) = (out.mueller[1][0][0], out.stderr[1][0][0]);
