@@ -171,6 +171,8 @@ def reference_microsurface(
     seed: int,
     batches: int,
     heights: npt.NDArray[np.float64] | None = None,
+    wavelength: float | None = None,
+    bistatic: npt.NDArray[np.float64] | None = None,
 ) -> dict[str, Any]: ...
 def reference_height_field(
     alpha: float, grid: int, correlation_length: float, seed: int, batch: int

@@ -10,7 +10,8 @@ matrix), until it leaves the surface or reaches ``max_order`` reflections. Rays 
 within a cone of half-angle ``cone`` around a detector direction ``wo`` are tallied as
 Mueller matrices, separately for 1, 2 and 3 or more reflections. No code is shared with
 the analytic model except the Fresnel amplitudes and the frame conventions of
-``pprender`` (``src/optics/mod.rs``); incoherent (no coherent backscatter enhancement).
+``pprender`` (``src/optics/mod.rs``); incoherent, with an optional separate coherent
+backscatter tally (``wavelength``, ``bistatic``; derivation in ``src/reference/mod.rs``).
 
 Roughness: Beckmann ``alpha`` with ``alpha**2 = 2 var(slope component) = E[sx**2 + sy**2]``;
 Blinn-Phong ``m`` converts with ``alpha = sqrt(2/(m+2))``. The heights are rescaled so the
@@ -38,9 +39,10 @@ import numpy as np
 from . import _core
 from ._core import Error
 
-__all__ = ["microsurface", "height_field", "ORDERS"]
+__all__ = ["microsurface", "height_field", "bistatic_directions", "ORDERS", "COHERENT_ORDERS"]
 
 ORDERS = (1, 2, "3+")
+COHERENT_ORDERS = (2, "3+")
 
 
 def _int(x: object, name: str, lo: int, hi: int) -> int:
@@ -95,6 +97,8 @@ def microsurface(
     seed: int = 0,
     batches: int = 10,
     heights: object = None,
+    wavelength: Optional[float] = None,
+    bistatic: object = None,
 ) -> Dict[str, Any]:
     """Monte Carlo Mueller BRDF of an explicit random microsurface, per bounce order.
 
@@ -134,6 +138,20 @@ def microsurface(
         ``(n, n)`` array of heights (``heights[i, j]`` at ``x = i, y = j``, grid units,
         periodic) traced instead of random surfaces (then give no roughness; every batch uses
         this surface).
+    wavelength : float, optional
+        Turns on the coherent backscatter tally: the wavelength in grid units (the units of
+        the tile and of ``correlation_length``), finite and > 0. Then the first direction of
+        ``wo`` must be ``wi`` itself (exact backscatter): the paths of order >= 2 tallied
+        there each interfere with their reverse path (the same facets in reverse order),
+        with the phase ``q . rho``, ``q = (2 pi / wavelength) (wo_b - wi)``, ``rho`` the last
+        hit point minus the first. The reverse path's Jones matrix is traced at exact
+        backscatter and used for every ``wo_b`` (small-angle approximation: the bistatic
+        dependence is in the phase only). Default None (no coherent tally).
+    bistatic : array_like, shape (..., 3), optional
+        Bistatic receiver directions ``wo_b`` (unit, ``z > 0``, within pi/4 of ``wi``) for
+        the coherent tally; :func:`bistatic_directions` builds them from angles. Only with
+        ``wavelength``. Default: ``wi`` alone (bistatic angle 0; ``coherent`` is then
+        ``(2, 4, 4)``).
 
     Returns
     -------
@@ -151,7 +169,14 @@ def microsurface(
         ensemble expectation (NaN for ``heights``); ``height_scale`` ``(batches,)``;
         ``elapsed_s``, ``rays_per_second``; and the parameters (``orders``, ``wi``, ``wo``,
         ``alpha``, ``eta``, ``rays``, ``grid``, ``correlation_length``, ``cone``,
-        ``max_order``, ``frame``, ``seed``, ``batches``).
+        ``max_order``, ``frame``, ``seed``, ``batches``, ``wavelength``). With
+        ``wavelength`` also ``coherent``: ``(2, ..., 4, 4)`` interference term in 1/sr for
+        orders ``COHERENT_ORDERS = (2, "3+")`` and the leading shape of ``bistatic``,
+        normalized as ``mueller[:, first wo]`` (coherent plus incoherent is the total at that
+        order: ``mueller[1, 0] + coherent[0, b]`` for order 2 with a ``(K, 3)`` ``wo``);
+        ``coherent_stderr``; ``coherent_unpaired`` ``(2,)``: tallied paths whose reversed
+        facet sequence does not exist (a facet faces away), which add nothing; and
+        ``bistatic`` ``(..., 3)``, ``bistatic_angle`` ``(...)`` (radians from ``wi``).
 
     Raises
     ------
@@ -191,6 +216,23 @@ def microsurface(
     n_batches = _int(batches, "batches", 2, 100_000)
     ell = _float(correlation_length, "correlation_length")
     cone_f = _float(cone, "cone")
+    lam: Optional[float] = None
+    bist: Optional[np.ndarray] = None
+    lead_b: tuple = ()
+    if wavelength is not None:
+        lam = _float(wavelength, "wavelength")
+        if not (math.isfinite(lam) and lam > 0.0):
+            raise Error(f"invalid wavelength = {lam}: must be finite and > 0 (grid units)")
+        b = wi_a if bistatic is None else bistatic
+        try:
+            bist = np.asarray(b, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise Error(f"invalid bistatic: cannot convert to a float64 array ({e})") from None
+        if bist.ndim == 0 or bist.shape[-1] != 3 or bist.size == 0:
+            raise Error(f"invalid bistatic: expected shape (..., 3), got {bist.shape}")
+        lead_b = bist.shape[:-1]
+    elif bistatic is not None:
+        raise Error("invalid bistatic: given without wavelength (the coherent tally needs a wavelength > 0)")
     out: Dict[str, Any] = _core.reference_microsurface(
         wi_a,
         np.ascontiguousarray(wo_a.reshape(-1, 3)),
@@ -205,11 +247,19 @@ def microsurface(
         n_seed,
         n_batches,
         h,
+        lam,
+        None if bist is None else np.ascontiguousarray(bist.reshape(-1, 3)),
     )
     out["mueller"] = out["mueller"].reshape((3,) + lead + (4, 4))
     out["stderr"] = out["stderr"].reshape((3,) + lead + (4, 4))
     out["counts"] = out["counts"].reshape((3,) + lead)
     out["projected_solid_angle"] = out["projected_solid_angle"].reshape(lead)
+    if bist is not None:
+        out["coherent"] = out["coherent"].reshape((2,) + lead_b + (4, 4))
+        out["coherent_stderr"] = out["coherent_stderr"].reshape((2,) + lead_b + (4, 4))
+        wb = bist / np.linalg.norm(bist, axis=-1, keepdims=True)
+        out["bistatic"] = wb
+        out["bistatic_angle"] = np.arccos(np.clip(wb @ (wi_a / np.linalg.norm(wi_a)), -1.0, 1.0))
     out["realized_alpha"] = float(np.mean(out["realized_alpha"]))
     out["rays_per_second"] = n_rays / max(out["elapsed_s"], 1e-12)
     out.update(
@@ -226,8 +276,60 @@ def microsurface(
         frame=frame,
         seed=n_seed,
         batches=n_batches,
+        wavelength=lam,
     )
     return out
+
+
+def bistatic_directions(wi: object, beta: object, azimuth: object = 0.0) -> np.ndarray:
+    """Receiver directions at bistatic angle ``beta`` from ``wi``, for ``bistatic``.
+
+    ``wo_b = cos(beta) wi + sin(beta) (cos(azimuth) e_theta + sin(azimuth) e_phi)``, with
+    ``e_theta``, ``e_phi`` the polar and azimuthal unit vectors at ``wi``: azimuth 0 tilts
+    in the plane of incidence away from the normal, pi/2 across it. At normal incidence
+    the plane of incidence is taken as x-z (``e_theta = x``, ``e_phi = y``).
+
+    Parameters
+    ----------
+    wi : array_like, shape (3,)
+        Unit vector toward the transmitter, ``z > 0``.
+    beta : array_like
+        Bistatic angles in radians, in [0, pi/4] (the limit :func:`microsurface` accepts).
+    azimuth : array_like, optional
+        Azimuths about ``wi`` in radians, broadcast against ``beta``. Default 0.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``broadcast(beta, azimuth).shape + (3,)``, unit vectors.
+
+    Raises
+    ------
+    pprender.Error
+        For an invalid argument (it is a ``ValueError``), naming the bad parameter.
+    """
+    try:
+        w = np.asarray(wi, dtype=np.float64)
+        b = np.asarray(beta, dtype=np.float64)
+        a = np.asarray(azimuth, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise Error(f"invalid wi, beta or azimuth: cannot convert to a float64 array ({e})") from None
+    if w.shape != (3,) or not np.all(np.isfinite(w)) or abs(np.linalg.norm(w) - 1.0) > 1e-6 or w[2] <= 0.0:
+        raise Error(f"invalid wi = {w.tolist()}: must be a unit vector with z > 0, shape (3,)")
+    if not np.all(np.isfinite(b)) or np.any(b < 0.0) or np.any(b > math.pi / 4):
+        raise Error(f"invalid beta = {b.tolist()}: must be in [0, pi/4] radians")
+    if not np.all(np.isfinite(a)):
+        raise Error(f"invalid azimuth = {a.tolist()}: must be finite")
+    w = w / np.linalg.norm(w)
+    th = math.acos(min(w[2], 1.0))
+    ph = math.atan2(w[1], w[0]) if math.hypot(w[0], w[1]) > 1e-14 else 0.0
+    e_t = np.array([math.cos(th) * math.cos(ph), math.cos(th) * math.sin(ph), -math.sin(th)])
+    e_p = np.array([-math.sin(ph), math.cos(ph), 0.0])
+    b, a = np.broadcast_arrays(b, a)
+    return (
+        np.cos(b)[..., None] * w
+        + np.sin(b)[..., None] * (np.cos(a)[..., None] * e_t + np.sin(a)[..., None] * e_p)
+    )
 
 
 def height_field(

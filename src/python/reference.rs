@@ -3,7 +3,7 @@
 
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::{Eta, C64};
-use crate::reference::{self as core_ref, microsurface, Config, Surface};
+use crate::reference::{self as core_ref, microsurface, Coherent, Config, Surface};
 use crate::Error;
 use numpy::ndarray::{Array1, Array2, Array3, Array4};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2};
@@ -47,10 +47,11 @@ fn mats(v: &[[[f64; 4]; 4]]) -> Vec<f64> {
 }
 
 /// `reference_microsurface(wi, wo, alpha, eta, rays, grid, correlation_length, cone,
-/// max_order, frame, seed, batches, heights=None) -> dict`; `wo` is `(K, 3)`, outputs are
-/// `(3, K, ...)`.
+/// max_order, frame, seed, batches, heights=None, wavelength=None, bistatic=None) -> dict`;
+/// `wo` is `(K, 3)`, outputs are `(3, K, ...)`; with `wavelength`, the coherent tally for
+/// the `(B, 3)` directions `bistatic` (default: `wi` alone) as `coherent` `(2, B, 4, 4)`.
 #[pyfunction]
-#[pyo3(signature = (wi, wo, alpha, eta, rays, grid, correlation_length, cone, max_order, frame, seed, batches, heights=None))]
+#[pyo3(signature = (wi, wo, alpha, eta, rays, grid, correlation_length, cone, max_order, frame, seed, batches, heights=None, wavelength=None, bistatic=None))]
 #[allow(clippy::too_many_arguments)]
 fn reference_microsurface<'py>(
     py: Python<'py>,
@@ -67,6 +68,8 @@ fn reference_microsurface<'py>(
     seed: u64,
     batches: i64,
     heights: Option<PyReadonlyArray2<'py, f64>>,
+    wavelength: Option<f64>,
+    bistatic: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let frame = Frame::from_str(frame)?;
     let wi = wi.as_array().to_vec();
@@ -110,8 +113,30 @@ fn reference_microsurface<'py>(
             )
         }
     };
+    let wi = V3::new(wi[0], wi[1], wi[2]);
+    let coherent = match (wavelength, bistatic) {
+        (Some(wavelength), b) => Some(Coherent {
+            wavelength,
+            bistatic: match b {
+                Some(b) => {
+                    let flat: Vec<f64> = b.as_array().iter().copied().collect();
+                    vec3(&flat, "bistatic")?
+                }
+                None => vec![wi],
+            },
+        }),
+        (None, Some(_)) => {
+            return Err(Error::param(
+                "bistatic",
+                "given without wavelength",
+                "the coherent tally needs a wavelength (grid units, > 0)",
+            )
+            .into())
+        }
+        (None, None) => None,
+    };
     let cfg = Config {
-        wi: V3::new(wi[0], wi[1], wi[2]),
+        wi,
         wo,
         eta: parse_eta(eta)?,
         surface,
@@ -121,6 +146,7 @@ fn reference_microsurface<'py>(
         frame,
         seed,
         batches: nonneg("batches", batches, 2, 100_000)? as u32,
+        coherent,
     };
     let out = py.detach(|| core_ref::run(&cfg))?;
     let k = cfg.wo.len();
@@ -171,6 +197,16 @@ fn reference_microsurface<'py>(
     d.set_item("alpha_unscaled_ratio", Array1::from(ratio).into_pyarray(py))?;
     let scale: Vec<f64> = out.surfaces.iter().map(|s| s.scale).collect();
     d.set_item("height_scale", Array1::from(scale).into_pyarray(py))?;
+    if let Some(c) = &cfg.coherent {
+        let nb = c.bistatic.len();
+        let c4 = |v: &[[[f64; 4]; 4]]| {
+            Array4::from_shape_vec((core_ref::COHERENT_ORDERS, nb, 4, 4), mats(v)).expect("shape")
+        };
+        d.set_item("coherent", c4(&out.coherent).into_pyarray(py))?;
+        d.set_item("coherent_stderr", c4(&out.coherent_stderr).into_pyarray(py))?;
+        let unpaired: Vec<i64> = out.coherent_unpaired.iter().map(|&c| c as i64).collect();
+        d.set_item("coherent_unpaired", Array1::from(unpaired).into_pyarray(py))?;
+    }
     d.set_item("elapsed_s", out.elapsed_s)?;
     Ok(d)
 }

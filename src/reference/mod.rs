@@ -5,7 +5,8 @@
 //! It shares no model code with [`crate::brdf`] or [`crate::microfacet`]: only the optics
 //! conventions ([`crate::optics::fresnel::fresnel_amplitudes`], the beam frames of
 //! [`crate::optics::frames::beam_bases`] and [`crate::optics::mueller::jones_to_mueller`]).
-//! Geometric optics, incoherent: no diffraction and no coherent backscatter enhancement.
+//! Geometric optics, incoherent: no diffraction; coherent backscatter only as the optional
+//! separate tally described below.
 //!
 //! # Estimator and its normalization
 //! The tile (area `A = n^2` grid units, periodic) is lit by a plane wave of irradiance
@@ -37,6 +38,57 @@
 //! frame at `wo = n`, whose azimuth is undefined at the pole). As `gamma -> 0` it tends to
 //! `beam_bases(frame, wi, wo)`.
 //!
+//! # Coherent backscatter (optional: [`Config::coherent`])
+//! Each escaping path of order `N >= 2` (hit points `r_1 .. r_N`) interferes with its
+//! reverse path (the same facets, `r_N` first). The tally uses the paths in the cone of the
+//! first detector, which must be the exact backscatter direction `wo = wi`.
+//!
+//! *Phase.* Fields go as `exp(i (k . r - omega t))` (the `exp(-i omega t)` convention of
+//! [`crate::optics`]), `k = 2 pi / lambda`. The incident wave travels along `-wi`, so its
+//! phase at `r` is `-k wi . r`; a wave leaving `r` for a far receiver in direction `w` has
+//! phase `-k w . r` relative to one leaving the origin. The inner path length is the same
+//! both ways, so `phi_fwd = -k (wi . r_1 + w . r_N) + c`, `phi_rev = -k (wi . r_N + w . r_1) + c`
+//! and `phi_rev - phi_fwd = Delta = q . rho`, `q = k (w - wi)`, `rho = r_N - r_1` (3D; the
+//! traversal wraps positions into the tile, so the log carries the physical displacement as
+//! the sum of the segments, [`trace::PathLog`]). The pair's field is
+//! `e^{i phi_fwd} (J + e^{i Delta} J_rev)` and its interference term
+//! `M(J + e^{i Delta} J_rev) - M(J) - M(J_rev)`. Each pair is met twice, once from each of
+//! its paths (at exact backscatter the partner's term, with the roles of `J`, `J_rev` swapped
+//! and `-Delta`, is the same matrix: the two sums differ by a global phase), so each path
+//! tallies half of it:
+//! `0.5 [M(J + e^{i Delta_b} J_rev) - M(J) - M(J_rev)]` for each bistatic direction `w = wo_b`,
+//! normalized as the incoherent tally of the first detector, so that the total at order `o`
+//! is `mueller + coherent` element by element.
+//!
+//! *Reverse path.* `J_rev` is traced, not assumed: the incident basis fields, arriving along
+//! `-wi`, are reflected off the recorded facet normals in reverse order
+//! ([`trace::reflect_reversed`]) and projected on the detector's bases exactly as a forward
+//! ray (transported to the reversed ray's exit direction `k'`). Reciprocity is then a test:
+//! one reflection's 3x3 map is `P = rs s s^T + rp p_out p_in^T`; for the reversed ray
+//! (incident `-k_out`) `s' = -s`, `p'_in = p_out`, `p'_out = p_in`, so `P' = P^T`, and a
+//! path's product reverses to `P^T` (tested for random facets in [`trace`]). At exact
+//! backscatter (`k = wi`) the reversed path lit along `-wi` is the time reverse, so
+//! `J_rev[a][b] = x_out_a . P^T x_in_b = x_in_b . P x_out_a`; the `sp` frame at backscatter
+//! has `x_out = -x_in`, `y_out = y_in`, hence `J_rev = F J^T F`, `F = diag(-1, 1)` (as
+//! [`crate::optics::mueller::reciprocal`] and `brdf::double`; tested on corner cubes). An
+//! order-2 backscatter path is planar (`h1 . h2 = 0`, both normals in the plane of `wi`
+//! and `d`), and reversing it changes neither the s/p bases nor the product
+//! `diag(rs1 rs2, rp1 rp2)`: `J_rev = J`, so the order-2 coherent term equals the
+//! incoherent one (PHYSICS.md 5b). Non-planar paths (orders 3+) have `J_rev != J`: less
+//! than 2x, except in the channels where reciprocity makes the two amplitudes equal (linear
+//! co-polarized, helicity preserving).
+//!
+//! *Approximations.* (1) `J_rev` is the one at exact backscatter for every bistatic
+//! direction (the standard small-angle approximation: the `beta` dependence is in the phase
+//! only). (2) For a ray leaving within the cone along `k != wi`, the reversed path lit along
+//! `-wi` leaves along `k'` (the same angle from `wi`), not along `k`; the difference from
+//! the exact partner is `O(cone)` per path and averages to `O(cone^2)` (order 2: at most
+//! 0.6% of M00 at cone 0.1 in the tests). (3) The reversed path is not traced for
+//! visibility (it is the time reverse of an unobstructed path up to the cone angle); when a
+//! facet faces away from the reversed ray it does not exist: the path then adds nothing and
+//! is counted in [`Output::coherent_unpaired`]. (4) Facets act as point scatterers at the
+//! hit points (geometric optics; no diffraction by the finite facets).
+//!
 //! # Errors
 //! Tallies are split into `batches` independent batches; each batch uses its own surface
 //! realization (seed stream `[0, batch]`) and its own rays, so the standard errors (of the
@@ -48,18 +100,20 @@ pub mod trace;
 
 use crate::optics::frames::{beam_bases, cross, dot, Frame, V3};
 use crate::optics::fresnel::{Eta, C64};
-use crate::optics::mueller::{jones_to_mueller, Mat4};
+use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
 use crate::{Error, Result};
 use microsurface::{gaussian_height_field, HeightField, SurfaceReport};
 use rayon::prelude::*;
 use rng::Rng;
 use std::sync::Arc;
-use trace::{trace_ray, Fields, RayEnd};
+use trace::{reflect_reversed, trace_ray_logged, Fields, PathLog, RayEnd};
 
 pub use microsurface::SlopeStats;
 
 /// Number of order bins: 1, 2 and 3+.
 pub const ORDERS: usize = 3;
+/// Number of coherent order bins: 2 and 3+.
+pub const COHERENT_ORDERS: usize = 2;
 /// Rays per parallel work item (fixed, so results do not depend on the thread count).
 const CHUNK: u64 = 2048;
 
@@ -77,6 +131,16 @@ pub enum Surface {
     },
     /// A user height field (`n x n`, `h[i * n + j] = h(x = i, y = j)`), the same in every batch.
     Heights(Arc<HeightField>),
+}
+
+/// The coherent-backscatter tally (module docs, "Coherent backscatter").
+#[derive(Debug, Clone)]
+pub struct Coherent {
+    /// Wavelength in grid units (the units of the tile and of `correlation_length`), > 0.
+    pub wavelength: f64,
+    /// Bistatic receiver directions `wo_b` (unit, within pi/4 of `wi`); the interference
+    /// term is tallied for each. `wo_b = wi` is exact backscatter (bistatic angle 0).
+    pub bistatic: Vec<V3>,
 }
 
 /// Parameters of one reference run.
@@ -97,6 +161,8 @@ pub struct Config {
     pub frame: Frame,
     pub seed: u64,
     pub batches: u32,
+    /// The coherent-backscatter tally, if wanted; then `wo[0]` must equal `wi`.
+    pub coherent: Option<Coherent>,
 }
 
 /// Results of a run. Order bins `o = 0, 1, 2` are 1, 2 and 3+ reflections.
@@ -118,6 +184,17 @@ pub struct Output {
     pub truncated_stderr: f64,
     /// Fraction of rays lost by the traversal (numerical failures; expected 0).
     pub lost: f64,
+    /// Coherent-backscatter interference term (1/sr, normalized as `mueller`) of the paths
+    /// in the first detector's cone, per coherent order bin `c` (0: order 2, 1: orders 3+)
+    /// and bistatic direction `b`: `coherent[c * B + b]`. Empty without
+    /// [`Config::coherent`]. At `wo_b = wi` the total (coherent plus incoherent) is
+    /// `mueller[o * K] + coherent[(o - 1) * B + b]`.
+    pub coherent: Vec<Mat4>,
+    /// Standard errors of `coherent` (batch means).
+    pub coherent_stderr: Vec<Mat4>,
+    /// Per coherent order bin: tallied paths whose reversed facet sequence does not exist
+    /// (a facet faces away from the reversed ray); their coherent term is 0.
+    pub coherent_unpaired: [u64; COHERENT_ORDERS],
     /// One report per batch surface.
     pub surfaces: Vec<SurfaceReport>,
     /// Wall time of the run in seconds.
@@ -132,25 +209,43 @@ struct Tally {
     albedo: [f64; ORDERS],
     truncated: f64,
     lost: u64,
+    /// Coherent terms, `coh[c * B + b]` (empty without the coherent tally).
+    coh: Vec<Mat4>,
+    unpaired: [u64; COHERENT_ORDERS],
+}
+
+/// `a += b` element by element.
+#[inline]
+fn add_mat(a: &mut Mat4, b: &Mat4) {
+    a.iter_mut()
+        .flatten()
+        .zip(b.iter().flatten())
+        .for_each(|(x, y)| *x += y);
 }
 
 impl Tally {
-    fn new(k: usize) -> Self {
+    fn new(k: usize, nb: usize) -> Self {
         Tally {
             m: vec![[[0.0; 4]; 4]; ORDERS * k],
             counts: vec![0; ORDERS * k],
             albedo: [0.0; ORDERS],
             truncated: 0.0,
             lost: 0,
+            coh: vec![[[0.0; 4]; 4]; COHERENT_ORDERS * nb],
+            unpaired: [0; COHERENT_ORDERS],
         }
     }
     fn add(&mut self, o: &Tally) {
         for (a, b) in self.m.iter_mut().zip(&o.m) {
-            a.iter_mut()
-                .flatten()
-                .zip(b.iter().flatten())
-                .for_each(|(x, y)| *x += y);
+            add_mat(a, b);
         }
+        for (a, b) in self.coh.iter_mut().zip(&o.coh) {
+            add_mat(a, b);
+        }
+        self.unpaired
+            .iter_mut()
+            .zip(&o.unpaired)
+            .for_each(|(a, b)| *a += b);
         self.counts
             .iter_mut()
             .zip(&o.counts)
@@ -176,9 +271,22 @@ struct Detector {
 }
 
 impl Detector {
-    /// Mueller matrix of an escaped ray (direction `k`, fields `e` of `e1, e2`).
+    /// The detector of axis `wo` and half-angle `cone` for rays carrying the fields of the
+    /// incident basis `e = (e1, e2)`.
+    fn new(frame: Frame, wi: V3, wo: V3, e: (V3, V3), cone: f64) -> Self {
+        let (x_in, y_in, x_out, _) = beam_bases(frame, wi, wo);
+        Detector {
+            wo,
+            a: [dot(x_in, e.0), dot(x_in, e.1)],
+            b: [dot(y_in, e.0), dot(y_in, e.1)],
+            x_out,
+            cos_cone: cone.cos(),
+        }
+    }
+
+    /// Jones matrix of an escaped ray (direction `k`, fields `e` of `e1, e2`).
     #[inline]
-    fn mueller(&self, k: V3, e: &Fields) -> Mat4 {
+    fn jones(&self, k: V3, e: &Fields) -> Jones {
         let px: [C64; 3] = std::array::from_fn(|i| e[0][i] * self.a[0] + e[1][i] * self.a[1]);
         let py: [C64; 3] = std::array::from_fn(|i| e[0][i] * self.b[0] + e[1][i] * self.b[1]);
         // Parallel transport of x_out from wo to k: R = I + [w]x + [w]x^2 / (1 + c).
@@ -193,8 +301,43 @@ impl Detector {
         x /= l;
         let y = cross(k, x);
         let proj = |u: V3, f: &[C64; 3]| f[0] * u[0] + f[1] * u[1] + f[2] * u[2];
-        jones_to_mueller(&[[proj(x, &px), proj(x, &py)], [proj(y, &px), proj(y, &py)]])
+        [[proj(x, &px), proj(x, &py)], [proj(y, &px), proj(y, &py)]]
     }
+}
+
+/// Add one escaped path's coherent terms to `out[b]`:
+/// `0.5 [M(J + e^{i Delta_b} J_rev) - M(J) - M(J_rev)]`, `Delta_b = q[b] . rho`, with `J`
+/// the path's Jones matrix in the backscatter detector's bases and `J_rev` that of the
+/// reversed facet sequence lit along `-wi` (module docs). Returns `false`, adding nothing,
+/// when the reversed path does not exist.
+#[allow(clippy::too_many_arguments)]
+fn coherent_terms(
+    det: &Detector,
+    eta: Eta,
+    wi: V3,
+    e0: &Fields,
+    j: &Jones,
+    log: &PathLog,
+    q: &[V3],
+    out: &mut [Mat4],
+) -> bool {
+    let mut er = *e0;
+    let Some(kr) = reflect_reversed(wi, &log.normals, eta, &mut er) else {
+        return false;
+    };
+    let jr = det.jones(kr, &er);
+    let (m, mr) = (jones_to_mueller(j), jones_to_mueller(&jr));
+    for (acc, &qb) in out.iter_mut().zip(q) {
+        let z = C64::from_polar(1.0, dot(qb, log.rho));
+        let sum: Jones = std::array::from_fn(|a| std::array::from_fn(|b| j[a][b] + z * jr[a][b]));
+        let ms = jones_to_mueller(&sum);
+        for r in 0..4 {
+            for c in 0..4 {
+                acc[r][c] += 0.5 * (ms[r][c] - m[r][c] - mr[r][c]);
+            }
+        }
+    }
+    true
 }
 
 /// Validate a direction (unit within 1e-6, finite).
@@ -289,6 +432,47 @@ fn validate(cfg: &Config) -> Result<()> {
     {
         microsurface::check_gaussian(alpha, grid, correlation_length)?;
     }
+    if let Some(c) = &cfg.coherent {
+        if !(c.wavelength.is_finite() && c.wavelength > 0.0) {
+            return Err(Error::param(
+                "wavelength",
+                c.wavelength,
+                "must be finite and > 0 (grid units)",
+            ));
+        }
+        let wo0 = unit(cfg.wo[0], "wo")?;
+        // Exact backscatter: the tally uses J_rev at wo = wi (module docs).
+        if (wo0 - wi).length() > 1e-9 {
+            return Err(Error::param(
+                "wo",
+                format!("{:?}", cfg.wo[0].to_array()),
+                format!(
+                    "with the coherent tally the first detector direction must equal wi = {:?} (exact backscatter)",
+                    cfg.wi.to_array()
+                ),
+            ));
+        }
+        if c.bistatic.is_empty() {
+            return Err(Error::param(
+                "bistatic",
+                "[]",
+                "give at least one bistatic direction (wi itself for exact backscatter)",
+            ));
+        }
+        for (i, &w) in c.bistatic.iter().enumerate() {
+            let w = unit(w, "bistatic")?;
+            let beta = dot(w, wi).clamp(-1.0, 1.0).acos();
+            if beta > std::f64::consts::FRAC_PI_4 || w[2] <= 0.0 {
+                return Err(Error::param(
+                    "bistatic",
+                    format!("element {i} = {:?}", w.to_array()),
+                    format!(
+                        "must be above the horizon and within pi/4 of wi (bistatic angle {beta} rad)"
+                    ),
+                ));
+            }
+        }
+    }
     Ok(())
 }
 
@@ -348,22 +532,23 @@ pub fn run(cfg: &Config) -> Result<Output> {
     let (e1, e2, _, _) = beam_bases(cfg.frame, wi, wo[0]);
     let detectors: Vec<Detector> = wo
         .iter()
-        .map(|&w| {
-            let (x_in, y_in, x_out, _) = beam_bases(cfg.frame, wi, w);
-            Detector {
-                wo: w,
-                a: [dot(x_in, e1), dot(x_in, e2)],
-                b: [dot(y_in, e1), dot(y_in, e2)],
-                x_out,
-                cos_cone: cfg.cone.cos(),
-            }
-        })
+        .map(|&w| Detector::new(cfg.frame, wi, w, (e1, e2), cfg.cone))
         .collect();
     let omega_p: Vec<f64> = wo
         .iter()
         .map(|w| std::f64::consts::PI * cfg.cone.sin().powi(2) * w[2])
         .collect();
     let e0: Fields = [e1, e2].map(|v| v.to_array().map(|x| C64::new(x, 0.0)));
+    // Coherent tally: q_b = (2 pi / lambda)(wo_b - wi) per bistatic direction.
+    let q: Vec<V3> = match &cfg.coherent {
+        Some(c) => c
+            .bistatic
+            .iter()
+            .map(|&w| Ok((std::f64::consts::TAU / c.wavelength) * (unit(w, "bistatic")? - wi)))
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
+    let nq = q.len();
 
     let nb = cfg.batches as u64;
     let mut batch_tallies = Vec::with_capacity(cfg.batches as usize);
@@ -383,24 +568,41 @@ pub fn run(cfg: &Config) -> Result<Output> {
             .into_par_iter()
             .map(|c| {
                 let mut rng = Rng::new(cfg.seed, &[1, b as u64, c]);
-                let mut t = Tally::new(nk);
+                let mut t = Tally::new(nk, nq);
+                let mut log = PathLog::default();
                 let count = CHUNK.min(rays_b - c * CHUNK);
                 for _ in 0..count {
                     let start = V3::new(rng.uniform() * period, rng.uniform() * period, z0);
-                    match trace_ray(&field, cfg.eta, wi, start, e0, cfg.max_order, max_cells) {
+                    let log_opt = if nq > 0 { Some(&mut log) } else { None };
+                    match trace_ray_logged(
+                        &field,
+                        cfg.eta,
+                        wi,
+                        start,
+                        e0,
+                        cfg.max_order,
+                        max_cells,
+                        log_opt,
+                    ) {
                         RayEnd::Escaped { order, k, e } => {
                             let bin = (order.min(3) - 1) as usize;
                             let p: f64 = e.iter().flatten().map(|z| z.norm_sqr()).sum();
                             t.albedo[bin] += 0.5 * p;
                             for (kk, det) in detectors.iter().enumerate() {
                                 if dot(k, det.wo) >= det.cos_cone {
-                                    let m = det.mueller(k, &e);
-                                    let acc = &mut t.m[bin * nk + kk];
-                                    acc.iter_mut()
-                                        .flatten()
-                                        .zip(m.iter().flatten())
-                                        .for_each(|(a, x)| *a += x);
+                                    let j = det.jones(k, &e);
+                                    let m = jones_to_mueller(&j);
+                                    add_mat(&mut t.m[bin * nk + kk], &m);
                                     t.counts[bin * nk + kk] += 1;
+                                    // The coherent tally: detector 0 (at wo = wi), orders >= 2.
+                                    if kk == 0 && nq > 0 && bin > 0 {
+                                        let cb = bin - 1;
+                                        let out = &mut t.coh[cb * nq..(cb + 1) * nq];
+                                        if !coherent_terms(det, cfg.eta, wi, &e0, &j, &log, &q, out)
+                                        {
+                                            t.unpaired[cb] += 1;
+                                        }
+                                    }
                                 }
                             }
                         }
@@ -414,7 +616,7 @@ pub fn run(cfg: &Config) -> Result<Output> {
                 t
             })
             .collect();
-        let mut tb = Tally::new(nk);
+        let mut tb = Tally::new(nk, nq);
         chunks.iter().for_each(|c| tb.add(c));
         batch_tallies.push(tb);
         batch_rays.push(rays_b as f64);
@@ -441,6 +643,30 @@ pub fn run(cfg: &Config) -> Result<Output> {
                 stderr[idx][i][j] = mean_se(&est).1;
             }
         }
+    }
+    // The coherent terms, normalized as the first detector's.
+    let mut coherent = vec![[[0.0; 4]; 4]; COHERENT_ORDERS * nq];
+    let mut coherent_stderr = vec![[[0.0; 4]; 4]; COHERENT_ORDERS * nq];
+    for idx in 0..COHERENT_ORDERS * nq {
+        for i in 0..4 {
+            for j in 0..4 {
+                let est: Vec<f64> = batch_tallies
+                    .iter()
+                    .zip(&batch_rays)
+                    .map(|(t, r)| t.coh[idx][i][j] / (r * omega_p[0]))
+                    .collect();
+                coherent[idx][i][j] = batch_tallies.iter().map(|t| t.coh[idx][i][j]).sum::<f64>()
+                    / (total * omega_p[0]);
+                coherent_stderr[idx][i][j] = mean_se(&est).1;
+            }
+        }
+    }
+    let mut coherent_unpaired = [0u64; COHERENT_ORDERS];
+    for t in &batch_tallies {
+        coherent_unpaired
+            .iter_mut()
+            .zip(&t.unpaired)
+            .for_each(|(a, b)| *a += b);
     }
     let mut albedo = [0.0; ORDERS];
     let mut albedo_stderr = [0.0; ORDERS];
@@ -470,10 +696,16 @@ pub fn run(cfg: &Config) -> Result<Output> {
         truncated,
         truncated_stderr: mean_se(&est).1,
         lost,
+        coherent,
+        coherent_stderr,
+        coherent_unpaired,
         surfaces,
         elapsed_s: start.elapsed().as_secs_f64(),
     })
 }
+
+#[cfg(test)]
+mod tests_coherent;
 
 #[cfg(test)]
 mod tests {
@@ -506,6 +738,7 @@ mod tests {
             frame: Frame::Sp,
             seed: 1,
             batches: 4,
+            coherent: None,
         }
     }
 

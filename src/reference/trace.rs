@@ -211,6 +211,22 @@ pub fn reflect(k_in: V3, h: V3, eta: Eta, e: &mut Fields) -> V3 {
     k_out
 }
 
+/// Reflect the fields `e` of a wave arriving along `-wi` off the facets `normals` in
+/// reverse order (the last one first): the reversed path of a traced one, at exact
+/// backscatter. Returns the exit direction, or `None` when a facet does not face the
+/// reversed ray (`k . h >= 0`: the reversed path does not exist), leaving `e` partly
+/// reflected.
+pub fn reflect_reversed(wi: V3, normals: &[V3], eta: Eta, e: &mut Fields) -> Option<V3> {
+    let mut d = -wi;
+    for &h in normals.iter().rev() {
+        if dot(d, h) >= 0.0 {
+            return None;
+        }
+        d = reflect(d, h, eta, e);
+    }
+    Some(d)
+}
+
 /// How a primary ray ended.
 #[derive(Debug, Clone, Copy)]
 pub enum RayEnd {
@@ -229,10 +245,44 @@ pub fn trace_ray(
     eta: Eta,
     wi: V3,
     start: V3,
-    mut e: Fields,
+    e: Fields,
     max_order: u32,
     max_cells: usize,
 ) -> RayEnd {
+    trace_ray_logged(f, eta, wi, start, e, max_order, max_cells, None)
+}
+
+/// The geometry of a traced path, recorded for the coherent tally: what the reversed path
+/// needs.
+#[derive(Debug, Clone, Default)]
+pub struct PathLog {
+    /// Unit facet normals in the order the ray hit them.
+    pub normals: Vec<V3>,
+    /// The first hit point, wrapped into the tile like the traversal's positions.
+    pub first: V3,
+    /// Last hit point minus first hit point, unwrapped (the physical displacement along
+    /// the path, although the traversal wraps positions into the tile).
+    pub rho: V3,
+}
+
+/// [`trace_ray`], also recording the path in `log` when given (cleared first). The ray's
+/// own arithmetic is the same with or without a log.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_ray_logged(
+    f: &HeightField,
+    eta: Eta,
+    wi: V3,
+    start: V3,
+    mut e: Fields,
+    max_order: u32,
+    max_cells: usize,
+    mut log: Option<&mut PathLog>,
+) -> RayEnd {
+    if let Some(l) = log.as_deref_mut() {
+        l.normals.clear();
+        l.first = V3::ZERO;
+        l.rho = V3::ZERO;
+    }
     let mut o = start;
     let mut d = -wi;
     let mut order = 0;
@@ -258,6 +308,15 @@ pub fn trace_ray(
                 );
                 let l = (plane.sx * plane.sx + plane.sy * plane.sy + 1.0).sqrt();
                 let h = V3::new(-plane.sx / l, -plane.sy / l, 1.0 / l);
+                if let Some(log) = log.as_deref_mut() {
+                    // `o` is the hit point (wrapped); `t d` the segment from the previous hit.
+                    if order > 0 {
+                        log.rho += t * d;
+                    } else {
+                        log.first = o;
+                    }
+                    log.normals.push(h);
+                }
                 d = reflect(d, h, eta, &mut e);
                 order += 1;
             }
@@ -336,6 +395,124 @@ mod tests {
         ) {
             Segment::Escaped => {}
             s => panic!("{s:?}"),
+        }
+    }
+
+    /// Height and upward unit normal of the triangulated surface at `(x, y)` (wrapped).
+    fn surface_at(f: &HeightField, x: f64, y: f64) -> (f64, V3) {
+        let n = f.n as f64;
+        let (x, y) = (x.rem_euclid(n), y.rem_euclid(n));
+        let (ci, cj) = (x.floor() as usize % f.n, y.floor() as usize % f.n);
+        let (u, v) = (x - ci as f64, y - cj as f64);
+        let k = if HeightField::main_diagonal(ci, cj) {
+            usize::from(u < v)
+        } else {
+            usize::from(u + v > 1.0)
+        };
+        let p = f.planes(ci, cj)[k];
+        let h = normalize(V3::new(-p.sx, -p.sy, 1.0));
+        (p.z0 + p.sx * u + p.sy * v, h)
+    }
+
+    #[test]
+    fn path_log_records_the_hit_points_and_normals() {
+        // The first hit point and the last one (first + rho, wrapped) lie on the surface,
+        // on facets with the recorded normals, and the log leaves the ray unchanged. A
+        // wrong (wrapped or partial) displacement would put the last point off the surface.
+        let (f, _) =
+            crate::reference::microsurface::gaussian_height_field(0.9, 16, 2.0, 4, &[]).unwrap();
+        let mut rng = crate::reference::rng::Rng::new(8, &[]);
+        let wi = normalize(V3::new(0.3, 0.2, 1.0));
+        let e = [real(V3::X), real(V3::Y)];
+        let mut log = PathLog::default();
+        let (mut multi, mut wrapped) = (0, 0);
+        for _ in 0..3000 {
+            let start = V3::new(rng.uniform() * 16.0, rng.uniform() * 16.0, f.h_max + 1e-3);
+            let plain = trace_ray(&f, Eta::PerfectConductor, wi, start, e, 20, 10_000);
+            let logged = trace_ray_logged(
+                &f,
+                Eta::PerfectConductor,
+                wi,
+                start,
+                e,
+                20,
+                10_000,
+                Some(&mut log),
+            );
+            let RayEnd::Escaped { order, k, e: ef } = logged else {
+                continue;
+            };
+            let RayEnd::Escaped { k: k0, e: e0, .. } = plain else {
+                panic!("{plain:?} vs {logged:?}");
+            };
+            assert!(k == k0 && ef == e0);
+            assert_eq!(log.normals.len(), order as usize);
+            let last = log.first + log.rho;
+            for (p, h) in [
+                (log.first, log.normals[0]),
+                (last, log.normals[order as usize - 1]),
+            ] {
+                let (z, hs) = surface_at(&f, p[0], p[1]);
+                assert!((p[2] - z).abs() < 1e-9, "{p:?} vs surface {z}");
+                assert!(dot(h, hs) > 1.0 - 1e-9, "{h:?} vs {hs:?}");
+            }
+            if order >= 2 {
+                multi += 1;
+                if !(0.0..16.0).contains(&last[0]) || !(0.0..16.0).contains(&last[1]) {
+                    wrapped += 1;
+                }
+            }
+        }
+        // Enough multiple paths, some of them crossing the tile's edge.
+        assert!(multi > 300 && wrapped > 20, "{multi} {wrapped}");
+    }
+
+    #[test]
+    fn reversed_path_is_the_transpose() {
+        // Reciprocity of the polarization ray tracing: facets h1..hN lit along -wi send the
+        // field P e out along k; the same facets in reverse order lit along -k send P_rev f
+        // out along wi, with f . (P e) = e . (P_rev f) for all transverse e, f (bilinear,
+        // no conjugation: P_rev = P^T). Random facets, an absorbing metal, 1 to 5 facets.
+        let eta = Eta::new(0.7, 3.1);
+        let mut rng = crate::reference::rng::Rng::new(3, &[]);
+        let wi = normalize(V3::new(-0.4, 0.3, 1.0));
+        for trial in 0..200 {
+            let n = 1 + trial % 5;
+            let mut normals = Vec::new();
+            let mut d = -wi;
+            while normals.len() < n {
+                // Any orientation (a facet of a closed object): a facing one always exists.
+                let h = normalize(V3::new(
+                    rng.uniform() - 0.5,
+                    rng.uniform() - 0.5,
+                    rng.uniform() - 0.5,
+                ));
+                if dot(d, h) < -0.05 {
+                    d = d - 2.0 * dot(d, h) * h;
+                    normals.push(h);
+                }
+            }
+            let ein = [mitsuba_basis(-wi), cross(-wi, mitsuba_basis(-wi))];
+            let mut pe = [real(ein[0]), real(ein[1])];
+            let mut k = -wi;
+            for &h in &normals {
+                k = reflect(k, h, eta, &mut pe);
+            }
+            let fin = [mitsuba_basis(-k), cross(-k, mitsuba_basis(-k))];
+            let mut pf = [real(fin[0]), real(fin[1])];
+            let out = reflect_reversed(k, &normals, eta, &mut pf).expect("the reverse exists");
+            assert!((out - wi).length() < 1e-12, "{out:?} vs {wi:?}");
+            let bil = |u: V3, f: &[C64; 3]| f[0] * u[0] + f[1] * u[1] + f[2] * u[2];
+            for a in 0..2 {
+                for b in 0..2 {
+                    let fwd = bil(fin[a], &pe[b]);
+                    let rev = bil(ein[b], &pf[a]);
+                    assert!(
+                        (fwd - rev).norm() < 1e-12,
+                        "{n} facets {a}{b}: {fwd} vs {rev}"
+                    );
+                }
+            }
         }
     }
 
