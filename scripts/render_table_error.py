@@ -22,6 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 TERMS = ("single", "double", "multiple")
 REF_ORDER = 96  # the reference's double-bounce order (the tables have their own)
 METAL, DIELECTRIC = complex(0.2, 3.4), complex(1.5, 0.0)
+BANK_RAYS = 4_000_000  # the default bank_rays of orders="surface"
 SURFACES = [
     ("beckmann", dict(alpha=0.1)),
     ("beckmann", dict(alpha=0.3)),
@@ -157,6 +158,46 @@ def main() -> None:
                     f"{nzd} x {npsid} @ {order} | {t.build_seconds:.3f} | {parts_cell(e)} | "
                     f"{e['max']:.1e} | {worst_cell(e)} |"
                 )
+    emit()
+
+    emit("## Materials with orders=\"surface\" (the path banks' orders)")
+    emit()
+    emit("The double part holds the banks' order 2 (with coherent backscatter), the multiple")
+    emit("part the orders beyond it, polarized, plus the depolarizing remainder (both stay")
+    emit("tabulated with `in_shader`). The banks' tables are trilinear in (theta_i, theta_o,")
+    emit("phi) on 2.5 and 7.5 deg nodes: along the renderer's coordinates they have kinks at")
+    emit("their nodes (and, along backscatter, a scallop between them, the product of the two")
+    emit("linear interpolations), which Catmull-Rom on the renderer's grid follows only with")
+    emit("finer grids than the seed's smooth terms: the defaults for these materials are")
+    emit("double n_z 128 and multiple n_z 512, n_psi 16 for both (rows `default`; `seed")
+    emit("grids` is 32 / 256 / 8). The error is against the material's own evaluation of")
+    emit("the banks' tables, not against the surface (for that: CHANGELOG, issue 24).")
+    emit(f"Default banks ({BANK_RAYS:.0e} rays per incidence node); the first row of an alpha")
+    emit("includes tracing its banks (`material s`).")
+    emit()
+    emit("| material | beta deg | grids | material s | table s | single; multiple; double | sum | worst at (theta, psi deg) |")
+    emit("|---|---|---|---|---|---|---|---|")
+    for alpha in (0.5, 0.65, 0.8):
+        for eta in (METAL, DIELECTRIC):
+            t0 = time.perf_counter()
+            m = pprender.Material("beckmann", alpha=alpha, eta=eta, terms=TERMS, orders="surface")
+            built = time.perf_counter() - t0
+            for beta_deg in (0.0, 2.0, 10.0):
+                theta_max = math.radians(85.0 if beta_deg <= 2.0 else 80.0)
+                for name, kw in (
+                    ("seed grids", dict(n_z_double=32, n_psi_double=8, n_z_lambertian=256, n_psi_lambertian=8)),
+                    ("default", {}),
+                    ("fine", dict(n_z_double=256, n_psi_double=32, n_z_lambertian=1024, n_psi_lambertian=32)),
+                ):
+                    if beta_deg == 0.0:
+                        kw = {k: v for k, v in kw.items() if "psi" not in k}
+                    t = pprender.brdf_table(m, math.radians(beta_deg), **kw)
+                    e = t.max_error(theta_max=theta_max)
+                    emit(
+                        f"| beckmann alpha {alpha:g}, {'metal' if eta.imag else 'dielectric'} | {beta_deg:g} | {name} | "
+                        f"{built:.1f} | {t.build_seconds:.3f} | {parts_cell(e)} | {e['max']:.1e} | {worst_cell(e)} |"
+                    )
+                    built = 0.0
     emit()
     out = ROOT / "docs" / "render-table.md"
     out.write_text("\n".join(lines) + "\n")

@@ -97,7 +97,7 @@ mod material_args {
 ///     remainder that closes the energy balance). Against the explicit surface, order 2
 ///     is within 0.92-1.16 where the double term is 0.27-2.75 (CHANGELOG, issue 24). Its
 ///     path banks are traced on first use (tens of seconds per alpha node) and kept for
-///     the process; the renderer's tables do not carry them yet (render() refuses).
+///     the process; the renderer's tables carry them (docs/render-table.md).
 /// bank_rays: primary rays per incidence node of each path bank (orders="surface").
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise
@@ -548,14 +548,6 @@ fn monostatic_table<'py>(
         );
     }
     let mat = material.inner.clone();
-    if mat.surface_orders.is_some() {
-        return Err(crate::Error::param(
-            "orders",
-            "\"surface\"",
-            "the monostatic double-bounce table tabulates the seed's double term: use orders=\"seed\"",
-        )
-        .into());
-    }
     let (table, secs, err) = py.detach(move || {
         let t0 = std::time::Instant::now();
         let table = crate::brdf::table::MonostaticTable::build(&mat, nodes, double_order);

@@ -21,6 +21,14 @@ pub const LN_FLOOR: f64 = -200.0;
 /// Default quadrature order of the double bounce in the table.
 pub const DEFAULT_DOUBLE_ORDER: usize = 48;
 
+/// Default intervals in `z` of the double part of a material with the path banks' orders
+/// (the multiple part gets 4 times as many; the seed's terms 32 and 256): the banks' tables
+/// are piecewise linear on 2.5 deg nodes, and Catmull-Rom across their kinks needs the
+/// finer grid (measured in docs/render-table.md).
+pub const BANKED_N_Z: usize = 128;
+/// Intervals in `psi` of the parts with the path banks' orders.
+pub const BANKED_N_PSI: usize = 16;
+
 /// Grid of one part; `None` takes the default of [`BrdfTableOptions::resolve`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PartOptions {
@@ -92,6 +100,13 @@ impl BrdfTableOptions {
                 continue;
             }
             let (dz, dpsi, dscale) = default_grid(kind, alpha, beta);
+            // the path banks' tables are piecewise linear on 2.5 deg nodes: their kinks
+            // need finer grids than the seed's smooth terms (docs/render-table.md)
+            let (dz, dpsi) = match kind {
+                PartKind::Double(_) if mat.surface_orders.is_some() => (BANKED_N_Z, BANKED_N_PSI),
+                PartKind::Depolarizing if banked_rest(mat) => (4 * BANKED_N_Z, BANKED_N_PSI),
+                _ => (dz, dpsi),
+            };
             let g = PartGrid {
                 kind,
                 n_z: o.n_z.unwrap_or(dz),
@@ -147,6 +162,12 @@ pub(super) fn part_material(mat: &Material, kind: PartKind) -> Material {
     m
 }
 
+/// The material's multiple term carries the path banks' orders beyond the enabled ones
+/// ([`crate::brdf::spec::Orders::Surface`]): its part is polarized.
+pub(super) fn banked_rest(mat: &Material) -> bool {
+    mat.spec.terms.multiple && mat.surface_orders.is_some()
+}
+
 /// A part's value in the table frame at table coordinates (`mat` from [`part_material`]).
 pub(super) fn part_reference(
     mat: &Material,
@@ -159,6 +180,10 @@ pub(super) fn part_reference(
     let (wi, wo) = table_dirs(beta, theta, psi);
     let m = match kind {
         PartKind::Single | PartKind::Depolarizing => crate::brdf::eval(mat, wi, wo, Frame::Sp),
+        // the path banks' order 2 (a table lookup, with its coherent backscatter)
+        PartKind::Double(_) if mat.surface_orders.is_some() => {
+            crate::brdf::terms::double_term(mat, wi, wo, Frame::Sp)
+        }
         PartKind::Double(order) => crate::brdf::double::eval_double(
             mat,
             wi,
@@ -241,15 +266,6 @@ impl BrdfTable {
                 "must be in [0, pi/2) radians",
             ));
         }
-        if mat.surface_orders.is_some() {
-            return Err(Error::param(
-                "orders",
-                "\"surface\"",
-                "the renderer's tables do not carry the path banks' orders yet (issue 24): \
-                 render this material with orders=\"seed\", or with the f64 reference \
-                 renderer",
-            ));
-        }
         let (grids, frame) = opts.resolve(mat, beta)?;
         let mut parts = vec![];
         let mut kinds = vec![];
@@ -262,10 +278,13 @@ impl BrdfTable {
                         single = Some(SingleParams::new(mat));
                         continue;
                     }
-                    PartKind::Depolarizing => {
+                    // the path banks' orders beyond the enabled ones are polarized and not
+                    // separable in (theta_i, theta_o): with them the part stays tabulated
+                    PartKind::Depolarizing if !banked_rest(mat) => {
                         depolarizing = Some(DepolarizingParams::new(mat));
                         continue;
                     }
+                    PartKind::Depolarizing => {}
                     PartKind::Double(_) => {}
                 }
             }

@@ -105,7 +105,8 @@ impl MonostaticTable {
     }
 }
 
-/// The double-bounce term alone (with coherent backscatter as configured) at backscatter.
+/// The double-bounce term alone (with coherent backscatter as configured) at backscatter:
+/// the seed's quadrature or the path banks' order 2 ([`crate::brdf::terms::double_term`]).
 fn double_only(mat: &Material, w: V3) -> Mat4 {
-    crate::brdf::double::eval_double_framed(mat, w, w, Frame::Sp)
+    crate::brdf::terms::double_term(mat, w, w, Frame::Sp)
 }

@@ -45,8 +45,11 @@ impl<'a> Materials<'a> {
 impl PathBrdf for Materials<'_> {
     fn eval(&self, mat: usize, n: V3, wi: V3, wo: V3) -> Framed {
         let mats = self.mats;
+        // the seed's double term is a quadrature per call; the path banks' order 2 is a
+        // table lookup and stays in
         let f = |m: usize, a: V3, b: V3| {
-            sum_terms_except(&mats[m], a, b, Frame::Sp, Some(Term::Double))
+            let skip = mats[m].surface_orders.is_none().then_some(Term::Double);
+            sum_terms_except(&mats[m], a, b, Frame::Sp, skip)
         };
         f.eval_framed(mat, n, wi, wo, 0xffff)
     }
@@ -61,7 +64,8 @@ impl PathBrdf for Materials<'_> {
         };
         let w_dep = if terms.multiple || terms.diffuse {
             let (ms, d) = m.depolarizing_albedo(cos_o, sin_o);
-            ms + d
+            // with orders="surface" the banks' orders (sampled by this lobe too)
+            ms + d + m.bank_albedo(cos_o, true)
         } else {
             0.0
         };

@@ -770,3 +770,38 @@ fn paths_go_to_the_pixels_of_open_faces() {
     // monostatic: the transmitter's view is the receiver's
     assert_eq!(counts.rx, counts.tx);
 }
+
+/// A surface met along a path is evaluated with its material's terms but the seed's double
+/// bounce (a quadrature per vertex); with `orders = "surface"` the banks' order 2 is a
+/// table lookup and stays in: the path BRDF is then the whole core BRDF.
+#[test]
+fn later_surfaces_keep_the_banks_order_2() {
+    use crate::brdf::spec::Orders;
+    let mut spec = MaterialSpec::new(
+        crate::microfacet::Distribution::Beckmann { alpha: 0.8 },
+        Eta::new(1.5, 0.0),
+    );
+    spec.terms = Terms {
+        single: true,
+        double: true,
+        multiple: true,
+        diffuse: false,
+    };
+    let seed = Arc::new(Material::new(spec.clone()).unwrap());
+    spec.orders = Orders::Surface;
+    spec.bank_rays = 20_000;
+    let surface = Arc::new(Material::new(spec).unwrap());
+    let mats = [seed.clone(), surface.clone()];
+    let brdf = Materials::new(&mats);
+    let n = V3::new(0.0, 0.0, 1.0);
+    let (wi, wo) = (
+        V3::new(0.3, 0.1, 0.95).normalize(),
+        V3::new(-0.2, 0.4, 0.89).normalize(),
+    );
+    let core = |m: &Material| crate::brdf::eval(m, wi, wo, Frame::Sp)[0][0];
+    let double = |m: &Material| crate::brdf::terms::double_term(m, wi, wo, Frame::Sp)[0][0];
+    let (a, b) = (brdf.eval(0, n, wi, wo).m[0][0], brdf.eval(1, n, wi, wo).m[0][0]);
+    assert!(double(&seed) > 1e-3 * core(&seed) && double(&surface) > 1e-3 * core(&surface));
+    assert!((a - (core(&seed) - double(&seed))).abs() < 1e-12 * a, "{a}");
+    assert!((b - core(&surface)).abs() < 1e-12 * b, "{b}");
+}
