@@ -800,7 +800,10 @@ fn later_surfaces_keep_the_banks_order_2() {
     );
     let core = |m: &Material| crate::brdf::eval(m, wi, wo, Frame::Sp)[0][0];
     let double = |m: &Material| crate::brdf::terms::double_term(m, wi, wo, Frame::Sp)[0][0];
-    let (a, b) = (brdf.eval(0, n, wi, wo).m[0][0], brdf.eval(1, n, wi, wo).m[0][0]);
+    let (a, b) = (
+        brdf.eval(0, n, wi, wo).m[0][0],
+        brdf.eval(1, n, wi, wo).m[0][0],
+    );
     assert!(double(&seed) > 1e-3 * core(&seed) && double(&surface) > 1e-3 * core(&surface));
     assert!((a - (core(&seed) - double(&seed))).abs() < 1e-12 * a, "{a}");
     assert!((b - core(&surface)).abs() < 1e-12 * b, "{b}");
