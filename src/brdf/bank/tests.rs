@@ -309,3 +309,58 @@ fn orders_three_and_up_match_the_explicit_surface() {
         "{q_bank} vs {q_ref}"
     );
 }
+
+/// In the plane of incidence (`phi = 0`, `pi`) the mirror-odd elements of every node are 0 (the geometry is its own mirror image), and the average in `phi`
+/// near the pole keeps a row's trapezoid sum (the albedo) and keeps them 0 at both ends,
+/// on a row of random matrices.
+#[test]
+fn mirror_odd_elements_vanish_in_the_plane_and_the_pole_average_keeps_the_sum() {
+    let t = OrderTable::build(bank(), Eta::Complex(C64::new(0.2, 3.4)), 2..=MAX_ORDER);
+    let odd = |m: &Mat4| {
+        (0..16)
+            .filter(|k| D[k / 4] * D[k % 4] < 0.0)
+            .map(|k| m[k / 4][k % 4].abs())
+            .fold(0.0, f64::max)
+    };
+    let mut largest: f64 = 0.0;
+    for i in 0..N_THETA {
+        for o in 0..N_THETA {
+            for j in [0, N_PHI - 1] {
+                let m = &t.data[(i * N_THETA + o) * N_PHI + j];
+                // rounding of the pole's rotation to phi = pi
+                assert!(odd(m) <= 1e-14 * m[0][0], "{i} {o} {j}: {m:?}");
+            }
+            largest = largest.max(odd(&t.data[(i * N_THETA + o) * N_PHI + 3]));
+        }
+    }
+    assert!(largest > 0.0, "the elements are not zero elsewhere");
+    let mut rng = crate::reference::rng::Rng::new(9, &[]);
+    let mut row: Vec<Mat4> = (0..N_PHI)
+        .map(|_| {
+            let mut m = [[0.0; 4]; 4];
+            m.iter_mut()
+                .flatten()
+                .for_each(|x| *x = rng.uniform() - 0.5);
+            m[0][0] += 1.0;
+            m
+        })
+        .collect();
+    let trapezoid = |r: &[Mat4]| {
+        (0..N_PHI)
+            .map(|j| r[j][0][0] * if j == 0 || j == N_PHI - 1 { 0.5 } else { 1.0 })
+            .sum::<f64>()
+    };
+    for j in [0, N_PHI - 1] {
+        for k in (0..16).filter(|k| D[k / 4] * D[k % 4] < 0.0) {
+            row[j][k / 4][k % 4] = 0.0;
+        }
+    }
+    let before = trapezoid(&row);
+    let middle = row[12];
+    assert_eq!(pole_half_width(1), 5);
+    assert_eq!(pole_half_width(5), 0);
+    smooth_near_pole(&mut row, 1);
+    assert!((trapezoid(&row) - before).abs() < 1e-12 * before.abs());
+    assert!(odd(&row[0]) < 1e-15 && odd(&row[N_PHI - 1]) < 1e-15);
+    assert!((row[12][1][2] - middle[1][2]).abs() > 1e-3, "averaged");
+}
