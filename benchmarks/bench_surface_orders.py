@@ -6,7 +6,11 @@ Run ``python benchmarks/bench_surface_orders.py [--rays N]``; prints a table.
 
 * **Cold node**: the first material at alpha 0.8 (a node) traces the node's bank
   (``bank_rays`` primary rays at each of 36 incidence nodes on 64 surfaces) and builds
-  its tables (order 2 and orders 3+, with the material's Fresnel and with F = 1).
+  its tables (order 2 and orders 3+, with the material's Fresnel and with F = 1). The
+  banks go to a fresh temporary disk cache (``pprender.set_cache_dir``), so that a warm
+  cache on the machine never hides the cold cost.
+* **Cold node, new process**: the same material in a new process, its bank read from
+  that disk cache (the read and the tables; includes the interpreter's start).
 * **New index at a cached node**: another eta at alpha 0.8 (tables only).
 * **Between nodes, cold**: alpha 0.75 needs node 0.7 (traced) and 0.8 (cached).
 * **Any alpha, nodes cached**: alpha 0.72, 0.74, 0.76, 0.78 with the same eta (the
@@ -17,6 +21,9 @@ Run ``python benchmarks/bench_surface_orders.py [--rays N]``; prints a table.
 """
 
 import argparse
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -37,8 +44,16 @@ def main(rays: int = 4_000_000) -> str:
         return pprender.Material("beckmann", alpha=alpha, eta=eta, terms=terms, orders=orders, bank_rays=rays)
 
     rows = []
+    cache = tempfile.TemporaryDirectory(prefix="pprender-bench-cache-")
+    pprender.set_cache_dir(cache.name)
     _, t = _timed(lambda: mat(0.8, 0.2 + 3.4j))
     rows.append(("cold node (alpha 0.8): bank + tables", t))
+    code = (
+        "import pprender; pprender.set_cache_dir(%r); pprender.Material('beckmann', alpha=0.8, eta=0.2+3.4j, "
+        "terms=%r, orders='surface', bank_rays=%d)" % (cache.name, terms, rays)
+    )
+    _, t = _timed(lambda: subprocess.run([sys.executable, "-c", code], check=True))
+    rows.append(("cold node, new process: bank read from the disk cache + tables", t))
     _, t = _timed(lambda: mat(0.8, 1.5 + 0j))
     rows.append(("new eta at a cached node (alpha 0.8, glass)", t))
     _, t = _timed(lambda: mat(0.75, 0.2 + 3.4j))
@@ -73,6 +88,7 @@ def main(rays: int = 4_000_000) -> str:
     ]
     text = "\n".join(lines)
     print(text)
+    cache.cleanup()
     return text
 
 

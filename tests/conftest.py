@@ -10,14 +10,27 @@
   (vectorized, float32, polarized). Importing Mitsuba is deferred to the first test that
   asks for it. If Mitsuba cannot be imported or the variant is missing, every test using
   the fixture fails (never skips) with the reason.
+* The path banks of ``orders="surface"`` are cached on disk in a fresh temporary directory
+  for the whole session (``PPRENDER_CACHE_DIR``, set here before anything imports
+  pprender, and inherited by the tests' subprocesses; removed at exit): a warm cache in
+  the user's ``~/.cache/pprender`` must never hide the cold cost of a bank, and the tests
+  must not fill it.
 """
 
 from __future__ import annotations
 
-import glob
-import importlib.metadata
+import atexit
 import os
-import sys
+import shutil
+import tempfile
+
+_CACHE_DIR = tempfile.mkdtemp(prefix="pprender-test-cache-")
+os.environ["PPRENDER_CACHE_DIR"] = _CACHE_DIR
+atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
+
+import glob  # noqa: E402
+import importlib.metadata  # noqa: E402
+import sys  # noqa: E402
 from pathlib import Path
 from types import ModuleType
 

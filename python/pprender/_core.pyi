@@ -2,6 +2,8 @@
 # mypy.stubtest in tests/test_stubs.py). Public documentation lives in the
 # pure-Python modules that wrap these functions.
 
+import os
+import pathlib
 from collections.abc import Sequence
 from typing import Callable, Any, final
 
@@ -83,6 +85,8 @@ class Material:
     @property
     def f_ms(self) -> float: ...
 
+def set_cache_dir(path: str | os.PathLike[str] | None) -> None: ...
+def cache_dir() -> pathlib.Path | None: ...
 def brdf(
     material: Material, wi: npt.NDArray[np.float64], wo: npt.NDArray[np.float64], frame: str
 ) -> npt.NDArray[np.float64]: ...

@@ -68,6 +68,10 @@ use crate::{Error, Result};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::ops::RangeInclusive;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+pub mod cache;
+pub mod progress;
 
 /// Spacing of the incidence and exit nodes in `theta` (2.5 deg).
 pub const THETA_STEP: f64 = PI / 72.0;
@@ -122,8 +126,8 @@ impl BankSpec {
 }
 
 /// The paths of orders 2 to [`MAX_ORDER`] of [`BankSpec`]'s surfaces at each incidence node
-/// (module docs).
-#[derive(Debug, Clone)]
+/// (module docs). Kept on disk by [`cache`].
+#[derive(Debug, Clone, PartialEq)]
 pub struct PathBank {
     pub spec: BankSpec,
     /// Primary rays traced per incidence node.
@@ -246,8 +250,21 @@ impl PathBank {
     /// Trace the bank (module docs). Parallel over rays; deterministic in `spec.seed`
     /// whatever the number of threads.
     pub fn trace(spec: &BankSpec) -> Result<PathBank> {
+        Self::trace_with_progress(spec, &|_, _| {})
+    }
+
+    /// [`PathBank::trace`], calling `progress(done, total)` from the worker threads as
+    /// rays are traced (`total = rays * N_THETA`; each call after a chunk of rays at one
+    /// node, `done` counted atomically, so calls may arrive out of order). The callback
+    /// throttles itself ([`progress::Reporter`]).
+    pub fn trace_with_progress(
+        spec: &BankSpec,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<PathBank> {
         spec.validate()?;
         let ns = spec.surfaces as u64;
+        let total = spec.rays * N_THETA as u64;
+        let done = AtomicU64::new(0);
         let mut paths = vec![vec![Vec::new(); MAX_ORDER - 1]; N_THETA];
         // per node: rays leaving after 1..=MAX_ORDER reflections, then truncated
         let mut counts = vec![[0u64; MAX_ORDER + 1]; N_THETA];
@@ -275,7 +292,8 @@ impl PathBank {
                         let mut rng = Rng::new(spec.seed, &[STREAM + 1, s, c]);
                         let mut out = vec![Vec::new(); MAX_ORDER - 1];
                         let (mut cnt, mut lost) = ([0u64; MAX_ORDER + 1], 0u64);
-                        for _ in 0..CHUNK.min(rays_s - c * CHUNK) {
+                        let n_rays = CHUNK.min(rays_s - c * CHUNK);
+                        for _ in 0..n_rays {
                             let start = V3::new(rng.uniform() * period, rng.uniform() * period, z0);
                             // a random azimuth of incidence per ray: one realization is not
                             // isotropic, the bank must be (rotations and reciprocity)
@@ -297,6 +315,7 @@ impl PathBank {
                                 }
                             }
                         }
+                        progress(done.fetch_add(n_rays, Ordering::Relaxed) + n_rays, total);
                         (out, cnt, lost)
                     })
                     .collect();

@@ -11,16 +11,28 @@
 //! A material between two nodes takes the linear interpolation in alpha of the two nodes'
 //! tables and albedos (tables and albedos alike, so the energy balance holds at any alpha).
 //!
-//! Both caches (banks, node tables) live for the process; a new index `eta` at a cached
-//! node costs only its tables (about a second), a new node its bank (tens of seconds on 2
-//! cores at the default rays).
+//! Both caches (banks, node tables) live for the process, and banks are also kept on disk
+//! ([`super::bank::cache`]) in the directory [`cache_dir`] names, so that a new process
+//! reads a bank instead of tracing it; a new index `eta` at a cached node costs only its
+//! tables (about a second), a new node its bank (tens of seconds to minutes on 2 cores at
+//! the default rays, with a progress line on stderr: [`super::bank::progress`]) the first
+//! time on a machine.
+//!
+//! The cache directory: [`set_cache_dir`], else the environment variable
+//! `PPRENDER_CACHE_DIR` (empty or `off`: no disk cache), else `$XDG_CACHE_HOME/pprender`,
+//! else `$HOME/.cache/pprender` (`%LOCALAPPDATA%\pprender\cache` on Windows). The crate's
+//! own tests ignore the environment and keep banks in memory only unless a test sets a
+//! directory.
 
-use super::bank::{BankSpec, OrderTable, PathBank, MAX_ORDER, N_THETA, THETA_STEP};
+use super::bank::progress::Reporter;
+use super::bank::{cache, BankSpec, OrderTable, PathBank, MAX_ORDER, N_THETA, THETA_STEP};
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::Eta;
 use crate::optics::mueller::Mat4;
 use crate::{Error, Result};
 use std::collections::HashMap;
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// The roughness nodes of the path banks (Beckmann alpha).
@@ -67,6 +79,108 @@ fn tables() -> &'static Mutex<HashMap<NodeKey, Arc<NodeTables>>> {
     T.get_or_init(|| Mutex::new(HashMap::new()))
 }
 
+/// The disk cache's directory: `None` until first asked for (then resolved from the
+/// environment), `Some(None)` when off.
+static CACHE_DIR: Mutex<Option<Option<PathBuf>>> = Mutex::new(None);
+
+/// The default cache directory from the environment variables `var` reads (module docs).
+fn env_cache_dir(var: impl Fn(&str) -> Option<OsString>) -> Option<PathBuf> {
+    let set = |k: &str| var(k).filter(|v| !v.is_empty());
+    if let Some(v) = var("PPRENDER_CACHE_DIR") {
+        if v.is_empty() || v.eq_ignore_ascii_case("off") {
+            return None;
+        }
+        return Some(std::path::absolute(&v).unwrap_or_else(|_| PathBuf::from(v)));
+    }
+    if let Some(x) = set("XDG_CACHE_HOME").filter(|x| Path::new(x).is_absolute()) {
+        return Some(PathBuf::from(x).join("pprender"));
+    }
+    if let Some(h) = set("HOME") {
+        return Some(PathBuf::from(h).join(".cache").join("pprender"));
+    }
+    set("LOCALAPPDATA").map(|l| PathBuf::from(l).join("pprender").join("cache"))
+}
+
+/// Where path banks are cached on disk (module docs); `None`: in memory only.
+pub fn cache_dir() -> Option<PathBuf> {
+    let mut dir = CACHE_DIR.lock().unwrap_or_else(|e| e.into_inner());
+    dir.get_or_insert_with(|| {
+        if cfg!(test) {
+            None
+        } else {
+            env_cache_dir(|k| std::env::var_os(k))
+        }
+    })
+    .clone()
+}
+
+/// Set where path banks are cached on disk for the rest of the process (`None`: in memory
+/// only). The directory is created when a bank is first written; a path that exists but
+/// is not a directory, or an empty path, is refused, naming `cache_dir`.
+pub fn set_cache_dir(dir: Option<PathBuf>) -> Result<()> {
+    let dir = match dir {
+        None => None,
+        Some(d) => Some(check_cache_dir(&d)?),
+    };
+    *CACHE_DIR.lock().unwrap_or_else(|e| e.into_inner()) = Some(dir);
+    Ok(())
+}
+
+/// `d` made absolute, if it can be a cache directory.
+fn check_cache_dir(d: &Path) -> Result<PathBuf> {
+    const RANGE: &str = "must be the path of a directory (created if missing), or None to keep \
+                         path banks in memory only";
+    if d.as_os_str().is_empty() {
+        return Err(Error::param("cache_dir", "\"\"", RANGE));
+    }
+    let abs = std::path::absolute(d)
+        .map_err(|e| Error::param("cache_dir", d.display(), format!("{e}")))?;
+    if abs.exists() && !abs.is_dir() {
+        return Err(Error::param(
+            "cache_dir",
+            format!("{:?}", d.display().to_string()),
+            format!("exists and is not a directory: {RANGE}"),
+        ));
+    }
+    Ok(abs)
+}
+
+/// The bank of alpha node `node` at `rays` rays per incidence node.
+fn bank_spec(node: usize, rays: u64) -> BankSpec {
+    BankSpec {
+        alpha: ALPHA_NODES[node],
+        grid: 256,
+        correlation_length: 8.0,
+        rays,
+        surfaces: SURFACES.min(rays as u32),
+        seed: 1,
+    }
+}
+
+/// `spec`'s bank thinned to [`PATH_CAP`]: from the disk cache in `dir` when a valid entry is
+/// there, else traced (with a progress line) and written there.
+fn load_or_trace(dir: Option<&Path>, spec: &BankSpec) -> Result<PathBank> {
+    cache::cached(dir, spec, PATH_CAP, || {
+        let kept = match dir {
+            Some(d) => format!("once per machine, kept in {}", d.display()),
+            None => "disk cache off: once per process".to_string(),
+        };
+        let progress = Reporter::new(
+            format!(
+                "pprender: tracing the path bank for alpha {}: {N_THETA} incidence nodes x {} \
+                 rays on {} surfaces ({kept})",
+                spec.alpha, spec.rays, spec.surfaces
+            ),
+            format!("pprender: path bank alpha {}", spec.alpha),
+        );
+        let mut b =
+            PathBank::trace_with_progress(spec, &|done, total| progress.update(done, total))?;
+        progress.finish();
+        b.thin(PATH_CAP);
+        Ok(b)
+    })
+}
+
 fn bank(node: usize, rays: u64) -> Result<Arc<PathBank>> {
     let key = (node, rays);
     // held while tracing: concurrent builders of the same bank wait for one trace
@@ -74,16 +188,10 @@ fn bank(node: usize, rays: u64) -> Result<Arc<PathBank>> {
     if let Some((_, b)) = kept.iter().find(|(k, _)| *k == key) {
         return Ok(b.clone());
     }
-    let mut b = PathBank::trace(&BankSpec {
-        alpha: ALPHA_NODES[node],
-        grid: 256,
-        correlation_length: 8.0,
-        rays,
-        surfaces: SURFACES.min(rays as u32),
-        seed: 1,
-    })?;
-    b.thin(PATH_CAP);
-    let b = Arc::new(b);
+    let b = Arc::new(load_or_trace(
+        cache_dir().as_deref(),
+        &bank_spec(node, rays),
+    )?);
     if kept.len() >= BANKS_KEPT {
         kept.remove(0);
     }

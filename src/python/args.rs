@@ -102,3 +102,24 @@ pub fn names(name: &'static str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<String>
     obj.extract::<Vec<String>>()
         .map_err(|_| invalid(name, obj, "a sequence of strings"))
 }
+
+/// `None` or a filesystem path (`str` or `os.PathLike`, not empty).
+pub fn opt_path(
+    name: &'static str,
+    obj: &Bound<'_, PyAny>,
+) -> PyResult<Option<std::path::PathBuf>> {
+    if obj.is_none() {
+        return Ok(None);
+    }
+    let p: std::path::PathBuf = obj
+        .extract()
+        .map_err(|_| invalid(name, obj, "a str or os.PathLike path, or None"))?;
+    if p.as_os_str().is_empty() {
+        return Err(invalid(
+            name,
+            obj,
+            "a directory path (an empty string is none), or None",
+        ));
+    }
+    Ok(Some(p))
+}

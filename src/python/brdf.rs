@@ -96,8 +96,16 @@ mod material_args {
 ///     "multiple" the orders beyond the enabled ones, polarized, plus a depolarizing
 ///     remainder that closes the energy balance). Against the explicit surface, order 2
 ///     is within 0.92-1.16 where the double term is 0.27-2.75 (CHANGELOG, issue 24). Its
-///     path banks are traced on first use (tens of seconds per alpha node) and kept for
-///     the process; the renderer's tables carry them (docs/render-table.md).
+///     path banks (one per alpha node 0.3, 0.4, ..., 1.0 and ``bank_rays``) are traced
+///     on first use, once per machine (about a minute per node on 2 cores at the default
+///     rays, with a progress line on stderr unless PPRENDER_PROGRESS=0), and cached on
+///     disk (0.1-0.3 GB per node, 147 MB at alpha 0.5) in pprender.cache_dir():
+///     pprender.set_cache_dir(path), else the environment variable PPRENDER_CACHE_DIR
+///     (empty or "off": memory only), else $XDG_CACHE_HOME/pprender, else
+///     ~/.cache/pprender. Later processes read them (a new eta needs only its tables, a
+///     few seconds); a missing, corrupt or stale entry (another pprender version or other
+///     parameters) is traced again, never trusted. The renderer's tables carry them
+///     (docs/render-table.md).
 /// bank_rays: primary rays per incidence node of each path bank (orders="surface").
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise

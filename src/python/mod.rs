@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 mod args;
 mod bank;
 pub mod brdf;
+mod cache;
 mod polarimetry;
 mod reference;
 mod render;
@@ -29,6 +30,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     bank::register(m)?;
     brdf::register(m)?;
+    cache::register(m)?;
     polarimetry::register(m)?;
     seed::register(m)?;
     reference::register(m)?;

@@ -103,3 +103,113 @@ fn bad_input_names_the_parameter() {
     let e = Material::new(spec).unwrap_err();
     assert!(e.to_string().contains("orders"), "{e}");
 }
+
+/// A small bank (the disk cache's bookkeeping, not its noise).
+fn small_spec() -> BankSpec {
+    BankSpec {
+        alpha: 0.6,
+        grid: 64,
+        correlation_length: 8.0,
+        rays: 4000,
+        surfaces: 2,
+        seed: 9,
+    }
+}
+
+/// A bank traced once is read back by the next process (here: the next call, whose build
+/// must not run); a corrupt or truncated entry is traced again and replaced, never trusted;
+/// a directory that cannot be written, or none, still gives the bank.
+#[test]
+fn banks_come_from_the_disk_cache_and_bad_entries_are_rebuilt() {
+    use crate::brdf::bank::cache::{self, tests::TempDir};
+    use std::fs;
+    let dir = TempDir::new("orders");
+    let spec = small_spec();
+    let traced = load_or_trace(Some(&dir.0), &spec).unwrap();
+    let path = cache::entry_path(&dir.0, &spec, PATH_CAP);
+    let good = fs::read(&path).unwrap();
+    let read = cache::cached(Some(&dir.0), &spec, PATH_CAP, || panic!("traced again")).unwrap();
+    assert_eq!(read, traced);
+    let retrace = || {
+        let mut b = PathBank::trace(&spec)?;
+        b.thin(PATH_CAP);
+        Ok(b)
+    };
+    let mut flipped = good.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 1;
+    for bad in [flipped, good[..good.len() - 5].to_vec()] {
+        fs::write(&path, &bad).unwrap();
+        let mut built = false;
+        let b = cache::cached(Some(&dir.0), &spec, PATH_CAP, || {
+            built = true;
+            retrace()
+        })
+        .unwrap();
+        assert!(built, "a bad entry was trusted");
+        assert_eq!(b, traced);
+        // replaced by a valid entry (tracing is deterministic: the same bytes)
+        assert_eq!(fs::read(&path).unwrap(), good);
+    }
+    assert_eq!(load_or_trace(Some(&dir.0), &spec).unwrap(), traced);
+    // a "directory" that is a file: the bank all the same, nothing written
+    let file = dir.0.join("a-file");
+    fs::write(&file, b"x").unwrap();
+    assert_eq!(load_or_trace(Some(&file), &spec).unwrap(), traced);
+    assert_eq!(fs::read(&file).unwrap(), b"x");
+    assert_eq!(load_or_trace(None, &spec).unwrap(), traced);
+}
+
+/// The directory from the environment (module docs), and `set_cache_dir`'s checks.
+#[test]
+fn the_cache_directory() {
+    use std::ffi::OsString;
+    let env = |pairs: &'static [(&'static str, &'static str)]| {
+        move |k: &str| {
+            pairs
+                .iter()
+                .find(|(n, _)| *n == k)
+                .map(|(_, v)| OsString::from(v))
+        }
+    };
+    let p = |s: &str| Some(PathBuf::from(s));
+    assert_eq!(
+        env_cache_dir(env(&[("PPRENDER_CACHE_DIR", "/x/y"), ("HOME", "/h")])),
+        p("/x/y")
+    );
+    assert_eq!(
+        env_cache_dir(env(&[("PPRENDER_CACHE_DIR", ""), ("HOME", "/h")])),
+        None
+    );
+    assert_eq!(
+        env_cache_dir(env(&[("PPRENDER_CACHE_DIR", "OFF"), ("HOME", "/h")])),
+        None
+    );
+    let rel = env_cache_dir(env(&[("PPRENDER_CACHE_DIR", "rel/dir")])).unwrap();
+    assert!(rel.is_absolute() && rel.ends_with("rel/dir"), "{rel:?}");
+    assert_eq!(
+        env_cache_dir(env(&[("XDG_CACHE_HOME", "/c"), ("HOME", "/h")])),
+        p("/c/pprender")
+    );
+    assert_eq!(
+        env_cache_dir(env(&[("XDG_CACHE_HOME", "c"), ("HOME", "/h")])),
+        p("/h/.cache/pprender")
+    );
+    assert_eq!(
+        env_cache_dir(env(&[("HOME", "/h")])),
+        p("/h/.cache/pprender")
+    );
+    assert_eq!(env_cache_dir(env(&[])), None);
+    // the crate's tests keep banks in memory unless a test names a directory
+    assert_eq!(cache_dir(), None);
+    let e = set_cache_dir(Some(PathBuf::new())).unwrap_err();
+    assert!(e.to_string().contains("cache_dir"), "{e}");
+    let e = set_cache_dir(Some(PathBuf::from(file!()))).unwrap_err();
+    assert!(
+        e.to_string().contains("cache_dir") && e.to_string().contains("not a directory"),
+        "{e}"
+    );
+    assert_eq!(cache_dir(), None);
+    let d = check_cache_dir(Path::new("not/yet/there")).unwrap();
+    assert!(d.is_absolute() && d.ends_with("not/yet/there"));
+}

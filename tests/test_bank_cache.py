@@ -1,0 +1,126 @@
+"""The path banks' disk cache (issue 24, "Bad input"): a bank traced by one process is read
+by the next (the same BRDF, the entry untouched); a corrupt or truncated entry is traced
+again and replaced, never trusted; ``set_cache_dir`` refuses what is not a directory,
+naming ``cache_dir``. Small banks (``bank_rays`` of a few ten thousand: seconds), in a
+temporary directory of the test's own."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pprender
+
+# rays of a bank no other test builds, so that this process traces it (the banks in memory
+# are keyed on alpha node and rays)
+RAYS = 20_011
+ALPHA = 0.5
+ETA = complex(1.3, 2.1)
+
+# builds the material in a new process and prints its BRDF at a few pairs
+SCRIPT = f"""
+import json, sys
+import numpy as np
+import pprender
+m = pprender.Material("beckmann", alpha={ALPHA}, eta=complex({ETA.real}, {ETA.imag}),
+                      terms=("single", "double", "multiple"), orders="surface",
+                      bank_rays={RAYS})
+wi = np.array([[0.0, 0.0, 1.0], [0.5, 0.0, 0.866], [0.3, 0.4, 0.866]])
+wo = np.array([[0.0, 0.0, 1.0], [-0.2, 0.3, 0.93], [0.6, -0.1, 0.79]])
+wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+json.dump(pprender.brdf(m, wi, wo).tolist(), sys.stdout)
+"""
+
+
+def _in_new_process(cache: Path) -> tuple[np.ndarray, str]:
+    env = dict(os.environ, PPRENDER_CACHE_DIR=str(cache), PPRENDER_PROGRESS="0")
+    r = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return np.array(json.loads(r.stdout)), r.stderr
+
+
+@pytest.fixture
+def cache(tmp_path: Path):
+    old = pprender.cache_dir()
+    pprender.set_cache_dir(tmp_path)
+    yield tmp_path
+    pprender.set_cache_dir(old)
+
+
+def _entry(cache: Path) -> Path:
+    entries = sorted(cache.glob("bank-alpha0.5000-*.ppbank"))
+    assert len(entries) == 1, list(cache.iterdir())
+    return entries[0]
+
+
+def test_a_bank_is_traced_once_and_read_by_the_next_process(cache: Path) -> None:
+    assert pprender.cache_dir() == cache
+    values, _ = _in_new_process(cache)  # traces and writes the entry
+    entry = _entry(cache)
+    good = entry.read_bytes()
+    stat = entry.stat()
+    # the same material in this process (its own memory cache is cold for these rays): read
+    m = pprender.Material("beckmann", alpha=ALPHA, eta=ETA, terms=("single", "double", "multiple"),
+                          orders="surface", bank_rays=RAYS)
+    assert m.orders == "surface"
+    again, _ = _in_new_process(cache)
+    np.testing.assert_array_equal(again, values)
+    after = entry.stat()
+    assert (after.st_ino, after.st_mtime_ns) == (stat.st_ino, stat.st_mtime_ns), "the entry was rewritten"
+    assert [p.name for p in cache.iterdir()] == [entry.name], "a temporary file was left"
+
+    # corrupt (one byte in the middle) or truncated: traced again, the same values, and the
+    # entry replaced by a valid one (tracing is deterministic: the same bytes)
+    flipped = bytearray(good)
+    flipped[len(good) // 2] ^= 0x40
+    for bad in (bytes(flipped), good[: len(good) // 3]):
+        entry.write_bytes(bad)
+        rebuilt, err = _in_new_process(cache)
+        assert "not valid" in err and "tracing it again" in err, err
+        np.testing.assert_array_equal(rebuilt, values)
+        assert entry.read_bytes() == good
+
+
+def test_no_disk_cache(tmp_path: Path) -> None:
+    """``PPRENDER_CACHE_DIR=""`` (or ``set_cache_dir(None)``) keeps banks in memory only."""
+    env = dict(os.environ, PPRENDER_CACHE_DIR="", PPRENDER_PROGRESS="0", HOME=str(tmp_path),
+               XDG_CACHE_HOME=str(tmp_path))
+    r = subprocess.run([sys.executable, "-c", "import pprender; print(pprender.cache_dir())"],
+                       capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == "None", r.stdout + r.stderr
+    env.pop("PPRENDER_CACHE_DIR")
+    r = subprocess.run([sys.executable, "-c", "import pprender; print(pprender.cache_dir())"],
+                       capture_output=True, text=True, env=env, timeout=60)
+    assert r.stdout.strip() == str(tmp_path / "pprender"), r.stdout + r.stderr
+    old = pprender.cache_dir()
+    try:
+        pprender.set_cache_dir(None)
+        assert pprender.cache_dir() is None
+        pprender.set_cache_dir(str(tmp_path / "new" / "dir"))
+        assert pprender.cache_dir() == tmp_path / "new" / "dir"
+    finally:
+        pprender.set_cache_dir(old)
+
+
+def test_the_session_does_not_use_the_users_cache() -> None:
+    """conftest.py points the whole session at a fresh temporary directory."""
+    d = pprender.cache_dir()
+    assert d is not None and d.name.startswith("pprender-test-cache-")
+
+
+@pytest.mark.parametrize("bad", ["", 3, 1.5, "FILE"])
+def test_set_cache_dir_names_the_parameter(tmp_path: Path, bad: object) -> None:
+    if bad == "FILE":
+        bad = tmp_path / "a-file"
+        bad.write_text("x")
+    old = pprender.cache_dir()
+    with pytest.raises(pprender.Error, match="cache_dir"):
+        pprender.set_cache_dir(bad)  # type: ignore[arg-type]
+    assert pprender.cache_dir() == old
