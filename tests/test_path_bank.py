@@ -105,3 +105,26 @@ def test_sphere_with_surface_orders_renders_its_brdf() -> None:
     # measured -1.6e-4 and -5e-5
     assert abs(got[0, 0] / want[0, 0] - 1) < 3e-3, (got[0, 0], want[0, 0])
     assert abs(got[3, 3] - want[3, 3]) < 3e-3 * want[0, 0], (got[3, 3], want[3, 3])
+
+
+@pytest.mark.parametrize("alpha", [0.3, 1.0])
+@pytest.mark.parametrize("eta", [1.0 + 1e-6j, complex(1e3, 1e3), complex("inf")])
+def test_surface_orders_at_the_extremes(alpha: float, eta: complex) -> None:
+    """Finite and physical at the ends of the banks' alpha range, for eta near 1, a huge
+    complex eta and a perfect conductor, at directions 1e-7 rad from grazing (beyond the
+    last incidence node, 87.5 deg, the tables hold the last node's value): M00 >= 0,
+    |M_ij| <= M00 (a Mueller matrix's elements are bounded by M00), reciprocal."""
+    m = pprender.Material("beckmann", alpha=alpha, eta=eta, terms=("single", "double", "multiple"),
+                          orders="surface", bank_rays=20_000)
+    g = 0.5 * np.pi - 1e-7
+    dirs = np.array([[np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)]
+                     for t in (0.0, 0.3, 1.2, g) for p in (0.0, 1.0, np.pi)])
+    wi = np.repeat(dirs, len(dirs), axis=0)
+    wo = np.tile(dirs, (len(dirs), 1))
+    f = pprender.brdf(m, wi, wo)
+    assert np.isfinite(f).all()
+    assert (f[:, 0, 0] >= 0).all()
+    assert (np.abs(f) <= f[:, :1, :1] * (1 + 1e-9) + 1e-300).all()
+    b = pprender.brdf(m, wo, wi)
+    c = np.diag([1.0, 1.0, -1.0, 1.0])
+    assert np.allclose(b, c @ np.swapaxes(f, 1, 2) @ c, rtol=1e-9, atol=1e-12 * f[:, 0, 0].max())
