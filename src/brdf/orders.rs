@@ -8,8 +8,9 @@
 //! (3..=8 with "double", 2..=8 without) when "multiple" is on; plus, per incidence node,
 //! their albedos with the material's Fresnel and with `F = 1` (from perfect-conductor
 //! tables), which the multiple term's depolarizing remainder and the diffuse layer need.
-//! A material between two nodes takes the linear interpolation in alpha of the two nodes'
-//! tables and albedos (tables and albedos alike, so the energy balance holds at any alpha).
+//! A material between two nodes takes the two nodes' tables interpolated in alpha
+//! ([`OrderTable::mix`]: `ln M00` and the normalized elements linearly), and the albedos
+//! of the mixed tables (so the energy balance holds at any alpha).
 //!
 //! Both caches (banks, node tables) live for the process, and banks are also kept on disk
 //! ([`super::bank::cache`]) in the directory [`cache_dir`] names, so that a new process
@@ -25,7 +26,9 @@
 //! directory.
 
 use super::bank::progress::Reporter;
-use super::bank::{cache, BankSpec, OrderTable, PathBank, MAX_ORDER, N_THETA, THETA_STEP};
+use super::bank::{
+    cache, BankSpec, OrderTable, PathBank, MAX_ORDER, MIX_FLOOR, N_THETA, THETA_STEP,
+};
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::Eta;
 use crate::optics::mueller::Mat4;
@@ -307,37 +310,51 @@ impl SurfaceOrders {
         }
         let b = node_tables(key(k0 + 1), eta)?;
         let mix_t = |x: &Option<OrderTable>, y: &Option<OrderTable>| match (x, y) {
-            (Some(x), Some(y)) => Some(OrderTable {
-                data: x
-                    .data
-                    .iter()
-                    .zip(&y.data)
-                    .map(|(p, q)| {
-                        let mut m = [[0.0; 4]; 4];
-                        for r in 0..4 {
-                            for c in 0..4 {
-                                m[r][c] = (1.0 - w) * p[r][c] + w * q[r][c];
-                            }
-                        }
-                        m
-                    })
-                    .collect(),
-            }),
+            (Some(x), Some(y)) => Some(x.mix(y, w)),
             _ => None,
         };
-        let mix_a = |x: &[Vec<f64>; 2], y: &[Vec<f64>; 2]| {
+        let (double, rest) = (mix_t(&a.double, &b.double), mix_t(&a.rest, &b.rest));
+        // the albedos of the mixed tables themselves (so that the energy balance holds at
+        // any alpha); with F = 1 from the perfect conductor's tables, which a material
+        // with another index does not hold: those are mixed like the tables' M00, in
+        // ln(A + eps)
+        let albedos = |t: &Option<OrderTable>| -> Vec<f64> {
+            match t {
+                Some(t) => (0..N_THETA).map(|i| t.interpolated_albedo(i)).collect(),
+                None => vec![0.0; N_THETA],
+            }
+        };
+        let fresnel = [albedos(&double), albedos(&rest)];
+        let white = if eta_key.is_none() {
+            fresnel.clone()
+        } else {
             [0, 1].map(|p| {
-                x[p].iter()
-                    .zip(&y[p])
-                    .map(|(u, v)| (1.0 - w) * u + w * v)
+                let peak = a.white[p]
+                    .iter()
+                    .chain(&b.white[p])
+                    .fold(0.0f64, |m, &x| m.max(x));
+                let eps = MIX_FLOOR * peak;
+                a.white[p]
+                    .iter()
+                    .zip(&b.white[p])
+                    .map(|(u, v)| {
+                        if eps > 0.0 {
+                            (((1.0 - w) * (u.max(0.0) + eps).ln() + w * (v.max(0.0) + eps).ln())
+                                .exp()
+                                - eps)
+                                .max(0.0)
+                        } else {
+                            0.0
+                        }
+                    })
                     .collect::<Vec<f64>>()
             })
         };
         Ok(SurfaceOrders {
-            double: mix_t(&a.double, &b.double),
-            rest: mix_t(&a.rest, &b.rest),
-            fresnel: mix_a(&a.fresnel, &b.fresnel),
-            white: mix_a(&a.white, &b.white),
+            double,
+            rest,
+            fresnel,
+            white,
         })
     }
 

@@ -193,6 +193,15 @@ impl PyOrderTable {
         Ok(out.into_pyarray(py))
     }
 
+    /// The table at fraction `w` in `[0, 1]` of the way to `other` (two roughness nodes),
+    /// as `orders="surface"` interpolates in alpha (`crate::brdf::bank::OrderTable::mix`).
+    fn mix(&self, other: &PyOrderTable, w: f64) -> PyResult<PyOrderTable> {
+        if !(0.0..=1.0).contains(&w) {
+            return Err(Error::param("w", w, "must be in [0, 1]").into());
+        }
+        Ok(PyOrderTable(self.0.mix(&other.0, w)))
+    }
+
     /// `(N_THETA, N_THETA, N_PHI, 4, 4)`: the nodes (`Sp` frames).
     #[getter]
     fn data<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray5<f64>> {

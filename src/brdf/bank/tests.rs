@@ -364,3 +364,68 @@ fn mirror_odd_elements_vanish_in_the_plane_and_the_pole_average_keeps_the_sum() 
     assert!(odd(&row[0]) < 1e-15 && odd(&row[N_PHI - 1]) < 1e-15);
     assert!((row[12][1][2] - middle[1][2]).abs() > 1e-3, "averaged");
 }
+
+/// [`OrderTable::mix`]: the nodes at `w = 0` and `1`; per node `M00` geometric (two tables
+/// of one shape, one 9 times the other, mix to 3 times the first at `w = 1/2`, up to the
+/// floor) and the normalized elements linear; the mix of two reciprocal tables is
+/// reciprocal.
+#[test]
+fn the_mix_is_geometric_in_m00_linear_in_the_normalized_elements_and_reciprocal() {
+    let t0 = OrderTable::build(bank(), Eta::Complex(C64::new(0.2, 3.4)), 2..=2);
+    let t1 = OrderTable::build(bank(), Eta::Complex(C64::new(1.5, 0.0)), 2..=MAX_ORDER);
+    let close = |a: &OrderTable, b: &OrderTable, tol: f64| {
+        for (p, q) in a.data.iter().zip(&b.data) {
+            for r in 0..4 {
+                for c in 0..4 {
+                    assert!((p[r][c] - q[r][c]).abs() <= tol * q[0][0].abs().max(1e-300));
+                }
+            }
+        }
+    };
+    close(&t0.mix(&t1, 0.0), &t0, 0.0);
+    close(&t0.mix(&t1, 1.0), &t1, 0.0);
+    let times = |k: f64| OrderTable {
+        data: t0
+            .data
+            .iter()
+            .map(|m| m.map(|r| r.map(|x| k * x)))
+            .collect(),
+    };
+    let (half, three) = (t0.mix(&times(9.0), 0.5), times(3.0));
+    let peak = t0.data.iter().map(|m| m[0][0]).fold(0.0, f64::max);
+    let mut checked = 0;
+    for (p, q) in half.data.iter().zip(&three.data) {
+        // the floor eps, 1e-4 of the larger table's peak (9 x t0's), moves 3 M00 by
+        // 2 eps / 3: 2e-3 relative where t0's M00 is 0.1 of its peak
+        if q[0][0] < 0.3 * peak {
+            continue;
+        }
+        for r in 0..4 {
+            for c in 0..4 {
+                assert!((p[r][c] - q[r][c]).abs() <= 2e-3 * q[0][0]);
+            }
+        }
+        checked += 1;
+    }
+    assert!(checked > 100, "{checked}");
+    let m = t0.mix(&t1, 0.3);
+    let at = |t: &OrderTable, i: usize, o: usize, j: usize| t.data[(i * N_THETA + o) * N_PHI + j];
+    for (i, o, j) in [(3, 10, 4), (0, 20, 0), (30, 5, 24), (12, 12, 7)] {
+        let (a, b) = (at(&m, i, o, j), at(&m, o, i, j));
+        for r in 0..4 {
+            for c in 0..4 {
+                assert!((a[r][c] - E[r] * b[c][r] * E[c]).abs() <= 1e-12 * a[0][0].max(1e-300));
+            }
+        }
+        // the normalized elements: the linear mix of the two tables'
+        let (p, q) = (at(&t0, i, o, j), at(&t1, i, o, j));
+        if p[0][0] > 0.0 && q[0][0] > 0.0 {
+            for r in 0..4 {
+                for c in 0..4 {
+                    let want = 0.7 * p[r][c] / p[0][0] + 0.3 * q[r][c] / q[0][0];
+                    assert!((a[r][c] / a[0][0] - want).abs() < 1e-12);
+                }
+            }
+        }
+    }
+}
