@@ -78,8 +78,8 @@ fn the_table_is_reciprocal() {
     let t = OrderTable::build(bank(), Eta::Complex(C64::new(1.5, 0.0)), 2..=MAX_ORDER);
     let mut rng = Rng::new(9, &[]);
     for _ in 0..200 {
-        let wi = dir(1.55 * rng.uniform(), 6.283 * rng.uniform());
-        let wo = dir(1.55 * rng.uniform(), 6.283 * rng.uniform());
+        let wi = dir(1.55 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
+        let wo = dir(1.55 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
         let a = t.eval(wi, wo, Frame::Sp);
         let b = reciprocal(&t.eval(wo, wi, Frame::Sp));
         assert!(
@@ -97,8 +97,8 @@ fn perfect_conductor_order_two_keeps_handedness() {
     let t = OrderTable::build(bank(), Eta::PerfectConductor, 2..=2);
     let mut rng = Rng::new(10, &[]);
     for _ in 0..100 {
-        let wi = dir(1.4 * rng.uniform(), 6.283 * rng.uniform());
-        let wo = dir(1.4 * rng.uniform(), 6.283 * rng.uniform());
+        let wi = dir(1.4 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
+        let wo = dir(1.4 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
         for frame in [Frame::Sp, Frame::Mitsuba] {
             let m = t.eval(wi, wo, frame);
             assert!((m[3][3] - m[0][0]).abs() <= 1e-12 * m[0][0], "{m:?}");
@@ -143,7 +143,7 @@ fn path_jones_is_the_double_terms_at_order_two() {
     ] {
         let mut checked = 0;
         for _ in 0..1000 {
-            let wi = dir(1.3 * rng.uniform(), 6.283 * rng.uniform());
+            let wi = dir(1.3 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
             let h1 = normalize(V3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, 0.8));
             let h2 = normalize(V3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, 0.8));
             if dot(wi, h1) <= 0.0 {
@@ -200,8 +200,8 @@ fn perfect_conductor_odd_orders_flip_handedness() {
     let mut rng = Rng::new(12, &[]);
     let mut mixed = 0;
     for _ in 0..200 {
-        let wi = dir(1.2 * rng.uniform(), 6.283 * rng.uniform());
-        let wo = dir(1.2 * rng.uniform(), 6.283 * rng.uniform());
+        let wi = dir(1.2 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
+        let wo = dir(1.2 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
         let m3 = t3.eval(wi, wo, Frame::Mitsuba);
         assert!((m3[3][3] + m3[0][0]).abs() <= 1e-12 * m3[0][0], "{m3:?}");
         let m = t23.eval(wi, wo, Frame::Mitsuba);

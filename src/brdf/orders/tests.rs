@@ -46,7 +46,7 @@ fn reciprocal_between_nodes() {
     let mut rng = Rng::new(3, &[]);
     for _ in 0..50 {
         let d = |rng: &mut Rng| {
-            let (t, p) = (1.4 * rng.uniform(), 6.283 * rng.uniform());
+            let (t, p) = (1.4 * rng.uniform(), std::f64::consts::TAU * rng.uniform());
             V3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
         };
         let (wi, wo) = (d(&mut rng), d(&mut rng));
