@@ -56,6 +56,7 @@
 //! node's value.
 
 use super::double::reflect_field;
+use super::table::{mirror, MIRROR_SIGN};
 use crate::optics::frames::{
     beam_bases, change_bases, cross, dot, mitsuba_basis, neg, normalize, Frame, V3,
 };
@@ -356,14 +357,31 @@ pub struct OrderTable {
     pub data: Vec<Mat4>,
 }
 
+/// Set the mirror-odd elements (those [`mirror`] flips) to 0: a matrix of a geometry that
+/// is its own mirror image.
+fn zero_mirror_odd(m: &mut Mat4) {
+    for (k, s) in MIRROR_SIGN.iter().enumerate() {
+        if *s < 0.0 {
+            m[k / 4][k % 4] = 0.0;
+        }
+    }
+}
+
+/// `exp((1 - w) ln(a + eps) + w ln(b + eps)) - eps` (at least 0; 0 when `eps <= 0`): the
+/// interpolation of a nonnegative quantity, geometric above `eps`, linear far below it.
+pub(crate) fn log_mix(a: f64, b: f64, w: f64, eps: f64) -> f64 {
+    if eps <= 0.0 {
+        return 0.0;
+    }
+    (((1.0 - w) * (a.max(0.0) + eps).ln() + w * (b.max(0.0) + eps).ln()).exp() - eps).max(0.0)
+}
+
 /// Floor of [`OrderTable::mix`]'s logarithmic interpolation, relative to the tables' largest
 /// `M00`: below it the mix turns linear (the banks' noise and empty nodes live there).
 pub const MIX_FLOOR: f64 = 1e-4;
 
 /// `E = diag(1, 1, 1, -1)`: node `(o, i, phi)` is `E T(i, o, phi)^T E` (module docs).
 const E: [f64; 4] = [1.0, 1.0, 1.0, -1.0];
-/// The mirror `y -> -y` in `Sp` frames: `M -> D M D`.
-const D: [f64; 4] = [1.0, 1.0, -1.0, -1.0];
 
 /// Zenith-transported Stokes basis at `w`: the minimal rotation taking `+z` to `w` applied
 /// to `(x, y)` (smooth over the hemisphere, `(x, y)` at the pole).
@@ -514,13 +532,7 @@ impl OrderTable {
                     // first cell, a jump the renderer's mirror rows turned into 2e-2
                     // errors of M12 beside the plane)
                     for j in [0, N_PHI - 1] {
-                        for (a, r) in row[j].iter_mut().enumerate() {
-                            for (b, x) in r.iter_mut().enumerate() {
-                                if D[a] * D[b] < 0.0 {
-                                    *x = 0.0;
-                                }
-                            }
-                        }
+                        zero_mirror_odd(&mut row[j]);
                     }
                     smooth_near_pole(row, k);
                 }
@@ -532,13 +544,7 @@ impl OrderTable {
                 // mirror-odd elements are noise: the folded paths cover one side)
                 let (x0, y0) = sp_out(V3::Z, 1.0, 0.0);
                 let mut p0 = change_bases(&pole, (x_in, y_in, xt, yt), (x_in, y_in, x0, y0));
-                for (a, r) in p0.iter_mut().enumerate() {
-                    for (b, x) in r.iter_mut().enumerate() {
-                        if D[a] * D[b] < 0.0 {
-                            *x = 0.0;
-                        }
-                    }
-                }
+                zero_mirror_odd(&mut p0);
                 for (j, node) in sums.iter_mut().take(N_PHI).enumerate() {
                     let (sp, cp) = (j as f64 * dphi).sin_cos();
                     let (xo, yo) = sp_out(V3::Z, cp, sp);
@@ -581,11 +587,7 @@ impl OrderTable {
             .zip(&other.data)
             .map(|(p, q)| {
                 let (a, b) = (p[0][0].max(0.0), q[0][0].max(0.0));
-                let m00 = if eps > 0.0 {
-                    (((1.0 - w) * (a + eps).ln() + w * (b + eps).ln()).exp() - eps).max(0.0)
-                } else {
-                    0.0
-                };
+                let m00 = log_mix(a, b, w, eps);
                 let (wa, wb) = match (a > 0.0, b > 0.0) {
                     (true, true) => ((1.0 - w) / a, w / b),
                     (true, false) => (1.0 / a, 0.0),
@@ -659,11 +661,7 @@ impl OrderTable {
             }
         }
         if mirrored {
-            for (a, row) in m.iter_mut().enumerate() {
-                for (b, x) in row.iter_mut().enumerate() {
-                    *x *= D[a] * D[b];
-                }
-            }
+            m = mirror(&m);
         }
         if frame != Frame::Sp {
             m = change_bases(&m, beam_bases(Frame::Sp, wi, wo), beam_bases(frame, wi, wo));
@@ -778,13 +776,7 @@ fn smooth_near_pole(row: &mut [Mat4], k: usize) {
         if idx <= n {
             row[idx]
         } else {
-            let mut m = row[2 * n - idx];
-            for (a, r) in m.iter_mut().enumerate() {
-                for (b, x) in r.iter_mut().enumerate() {
-                    *x *= D[a] * D[b];
-                }
-            }
-            m
+            mirror(&row[2 * n - idx])
         }
     };
     let scale = 1.0 / (2 * w + 1) as f64;

@@ -27,7 +27,7 @@
 
 use super::bank::progress::Reporter;
 use super::bank::{
-    cache, BankSpec, OrderTable, PathBank, MAX_ORDER, MIX_FLOOR, N_THETA, THETA_STEP,
+    cache, log_mix, BankSpec, OrderTable, PathBank, MAX_ORDER, MIX_FLOOR, N_THETA, THETA_STEP,
 };
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::Eta;
@@ -211,12 +211,6 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
     let build = |eta: Eta, on: bool, orders: std::ops::RangeInclusive<usize>| {
         on.then(|| OrderTable::build(&b, eta, orders))
     };
-    let albedos = |t: &Option<OrderTable>| -> Vec<f64> {
-        match t {
-            Some(t) => (0..N_THETA).map(|i| t.interpolated_albedo(i)).collect(),
-            None => vec![0.0; N_THETA],
-        }
-    };
     let double = build(eta, key.double, 2..=2);
     let rest = build(eta, key.multiple, first_rest..=MAX_ORDER);
     let fresnel = [albedos(&double), albedos(&rest)];
@@ -238,6 +232,14 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
         .unwrap_or_else(|e| e.into_inner())
         .insert(key, t.clone());
     Ok(t)
+}
+
+/// A table's albedo at each incidence node (zeros without the table).
+fn albedos(t: &Option<OrderTable>) -> Vec<f64> {
+    match t {
+        Some(t) => (0..N_THETA).map(|i| t.interpolated_albedo(i)).collect(),
+        None => vec![0.0; N_THETA],
+    }
 }
 
 /// The orders >= 2 of one material (module docs).
@@ -318,12 +320,6 @@ impl SurfaceOrders {
         // any alpha); with F = 1 from the perfect conductor's tables, which a material
         // with another index does not hold: those are mixed like the tables' M00, in
         // ln(A + eps)
-        let albedos = |t: &Option<OrderTable>| -> Vec<f64> {
-            match t {
-                Some(t) => (0..N_THETA).map(|i| t.interpolated_albedo(i)).collect(),
-                None => vec![0.0; N_THETA],
-            }
-        };
         let fresnel = [albedos(&double), albedos(&rest)];
         let white = if eta_key.is_none() {
             fresnel.clone()
@@ -337,16 +333,7 @@ impl SurfaceOrders {
                 a.white[p]
                     .iter()
                     .zip(&b.white[p])
-                    .map(|(u, v)| {
-                        if eps > 0.0 {
-                            (((1.0 - w) * (u.max(0.0) + eps).ln() + w * (v.max(0.0) + eps).ln())
-                                .exp()
-                                - eps)
-                                .max(0.0)
-                        } else {
-                            0.0
-                        }
-                    })
+                    .map(|(&u, &v)| log_mix(u, v, w, eps))
                     .collect::<Vec<f64>>()
             })
         };

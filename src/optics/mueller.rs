@@ -74,6 +74,15 @@ pub fn scale(a: &Mat4, s: f64) -> Mat4 {
     m
 }
 
+/// The largest `|a_ij - b_ij|`.
+pub fn max_abs_diff(a: &Mat4, b: &Mat4) -> f64 {
+    a.iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
 /// The reciprocal partner of a Mueller matrix in the `Sp` frame.
 ///
 /// Reciprocity of the scattering amplitude gives, for the reversed path expressed in the

@@ -3,6 +3,7 @@
 use super::trace::reflect;
 use super::*;
 use crate::optics::frames::normalize;
+use crate::optics::mueller::max_abs_diff;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 fn dir(theta_deg: f64, phi_deg: f64) -> V3 {
@@ -43,14 +44,6 @@ fn forward(det: &Detector, e0: &Fields, wi: V3, normals: &[V3], eta: Eta) -> (Jo
         k = reflect(k, h, eta, &mut e);
     }
     (det.jones(k, &e), k)
-}
-
-fn max_abs_diff(a: &Mat4, b: &Mat4) -> f64 {
-    a.iter()
-        .flatten()
-        .zip(b.iter().flatten())
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
 }
 
 #[test]

@@ -88,6 +88,15 @@ fn worst(a: &[f32], b: &[f32], floor: f32) -> (f64, usize) {
     (w, k)
 }
 
+/// The smooth-shaded sphere (radius 0.5) at the oblique attitude the shading tests use.
+fn oblique_sphere() -> (Mesh, Vec<Rot>) {
+    let rot = crate::render::geometry::rotations_from_quaternions(&[
+        [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt())
+    ])
+    .unwrap();
+    (uv_sphere(0.5, 48, 96), rot)
+}
+
 /// One material's render by the kernel on its packed `table`, by the f64 twin on the
 /// same table (as `Lidar(arithmetic="f64")` runs it) and by the twin with the exact
 /// core BRDF of `mat`, on the 64-pixel sensor at `beta`.
@@ -122,11 +131,7 @@ fn kernel_twin_core(
 fn kernel_matches_twin_and_core_per_pixel() {
     let gpu = context(DeviceChoice::Auto).expect("a Vulkan device (lavapipe)");
     let mat = metal();
-    let mesh = uv_sphere(0.5, 48, 96);
-    let rot = crate::render::geometry::rotations_from_quaternions(&[
-        [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt())
-    ])
-    .unwrap();
+    let (mesh, rot) = oblique_sphere();
     for beta in [0.0, 2f64.to_radians()] {
         let opts = BrdfTableOptions {
             frame: Some(TableFrame::Bisector),
@@ -186,11 +191,7 @@ fn kernel_matches_twin_and_core_per_pixel() {
 fn in_shader_matches_twin_and_core_per_pixel() {
     use crate::microfacet::{Correlation, Shadowing};
     let gpu = context(DeviceChoice::Auto).expect("a Vulkan device (lavapipe)");
-    let mesh = uv_sphere(0.5, 48, 96);
-    let rot = crate::render::geometry::rotations_from_quaternions(&[
-        [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt())
-    ])
-    .unwrap();
+    let (mesh, rot) = oblique_sphere();
     let single_only = Terms {
         single: true,
         double: false,
@@ -316,11 +317,7 @@ fn in_shader_matches_twin_and_core_per_pixel() {
 #[test]
 fn surface_orders_kernel_matches_twin_and_core_per_pixel() {
     let gpu = context(DeviceChoice::Auto).expect("a Vulkan device (lavapipe)");
-    let mesh = uv_sphere(0.5, 48, 96);
-    let rot = crate::render::geometry::rotations_from_quaternions(&[
-        [0.9, 0.3, -0.2, 0.25].map(|x: f64| x / (0.81f64 + 0.09 + 0.04 + 0.0625).sqrt())
-    ])
-    .unwrap();
+    let (mesh, rot) = oblique_sphere();
     let mut spec = MaterialSpec::new(
         Distribution::Beckmann { alpha: 0.8 },
         Eta::Complex(C64::new(1.2, 10.4)),

@@ -3,6 +3,7 @@ use crate::brdf::double::eval_double;
 use crate::brdf::{MaterialSpec, Surface};
 use crate::microfacet::Distribution;
 use crate::optics::fresnel::C64;
+use crate::optics::mueller::max_abs_diff as max_diff;
 use crate::optics::mueller::reciprocal;
 use std::sync::OnceLock;
 
@@ -11,13 +12,8 @@ fn dir(theta: f64, phi: f64) -> V3 {
     V3::new(s * phi.cos(), s * phi.sin(), c)
 }
 
-fn max_diff(a: &Mat4, b: &Mat4) -> f64 {
-    a.iter()
-        .flatten()
-        .zip(b.iter().flatten())
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
-}
+/// The mirror `y -> -y` in `Sp` frames: `M -> D M D`.
+const D: [f64; 4] = [1.0, 1.0, -1.0, -1.0];
 
 /// The node symmetries the table is built with (module docs) hold for the uncorrelated
 /// double term, an independent reciprocal and mirror-symmetric model in `Sp` frames:
