@@ -52,6 +52,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.special import gammaln, xlogy
+from scipy.stats import norm
 from scipy.spatial.transform import Rotation
 
 from .. import lidar as _lidar
@@ -67,6 +68,12 @@ __all__ = [
     "attitude_error",
     "fisher_information",
     "fit_nlopt",
+    "FitWarning",
+    "diagnose_fit",
+    "maximum_likelihood",
+    "attitude_starts",
+    "chain_summary",
+    "ChainSummary",
     "poisson_log_likelihood",
     "sample_emcee",
 ]
@@ -86,6 +93,47 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
 }
 
 _MATERIAL_PARAMS = ("alpha", "n", "k")
+
+
+class FitWarning(UserWarning):
+    """A fit not to be trusted as it stands, or a model set up so that fits fail.
+
+    :attr:`FitResult.problems` says why; also for ambiguous fits
+    (:attr:`FitResult.alternatives`) and short emcee chains (:func:`chain_summary`).
+    """
+
+
+def _fit_settings(lidar: _lidar.Lidar, settings: Any, device: str, free: Sequence[str]) -> _lidar.Settings:
+    """The settings a :class:`ForwardModel` renders with (its ``settings`` parameter)."""
+    if isinstance(settings, str) and settings == "lidar":
+        out = lidar.settings
+    elif isinstance(settings, _lidar.Settings):
+        out = settings
+    elif settings is None:
+        out = lidar.settings
+        if out.coverage != "analytic":
+            out = replace(out, coverage="analytic", pixel_samples=None)
+        if out.quality != "reference" and out.arithmetic is None:
+            try:
+                on_cpu = _lidar.device_info(device).get("device_type") == "Cpu"
+            except Error:
+                on_cpu = False
+            if on_cpu:
+                out = replace(out, arithmetic="f64")
+    else:
+        raise Error(f'invalid settings = {settings!r}: None (continuous, the default), "lidar" or a pprender.Settings')
+    if out.coverage != "analytic" and any(p in free for p in ("rx", "ry", "rz", "scale")):
+        import warnings
+
+        warnings.warn(
+            "ForwardModel: sampled coverage (pixel_samples) makes the expected counts step where a silhouette "
+            "edge crosses a sample point, so the likelihood is piecewise flat in the attitude and scale: "
+            "optimizers stop on its steps and the Fisher information by finite differences is unreliable. "
+            "Leave settings=None (analytic coverage) for fits",
+            FitWarning,
+            stacklevel=3,
+        )
+    return out
 
 
 # ---------------------------------------------------------------------- likelihood
@@ -279,6 +327,18 @@ class ForwardModel:
         Number of scenes (and of materials) kept (least recently used dropped).
     device : str
         Passed to :func:`pprender.render`.
+    settings : Settings or "lidar", optional
+        How the model renders. Default (None): the ``lidar``'s settings with
+        ``coverage="analytic"`` (each pixel's visible area clipped exactly), so that the
+        expected counts, and the likelihood, are continuous in the attitude and the scale;
+        and, where ``device`` resolves to a CPU (lavapipe), ``arithmetic="f64"``, the
+        native CPU renderer (as fast there as sampled coverage on lavapipe). With sampled
+        visibility (``pixel_samples``) the profile steps whenever a silhouette edge crosses a
+        sample point: the likelihood is piecewise flat along the attitude, local optimizers
+        stop on its steps, and finite-difference Fisher information is wrong
+        (docs/fit-recovery.md measures both). ``"lidar"`` renders with the ``lidar``'s own
+        settings; a :class:`pprender.Settings` is used as given. Settings with sampled
+        coverage and a free attitude or scale warn (:class:`FitWarning`).
     """
 
     def __init__(
@@ -299,6 +359,7 @@ class ForwardModel:
         face_material: Any = None,
         cache_size: int = 64,
         device: str = "auto",
+        settings: Any = None,
     ) -> None:
         if not isinstance(instrument, Instrument):
             raise Error(f"invalid instrument of type {type(instrument).__name__}: expected Instrument")
@@ -379,6 +440,7 @@ class ForwardModel:
         ch = instrument.channels
         self.lidar = replace(lidar, polarization=tuple(ch.transmit)) if ch.single_generator else lidar  # type: ignore[union-attr]
         self.device = device
+        self.settings = _fit_settings(lidar, settings, device, free)
         # geometry and materials (validated once by building the reference scene)
         base = _lidar.Scene(mesh, materials, smooth=smooth, face_material=face_material, wavelength=instrument.wavelength)
         verts, faces, meta, vn = _lidar._mesh_arrays(mesh)
@@ -530,7 +592,8 @@ class ForwardModel:
             except Error:
                 continue  # e.g. alpha or n out of the material's range: -inf
             t0 = time.perf_counter()
-            res = _lidar.render(sc, self.lidar, rot[rows], outputs=("profile",), device=self.device)
+            res = _lidar.render(sc, self.lidar, rot[rows], outputs=("profile",), device=self.device,
+                                settings=self.settings)
             self.render_seconds += time.perf_counter() - t0
             self.render_calls += 1
             lam = expected_counts(res.profile, self.instrument, bin_edges=res.bin_edges, out_edges=self.bin_edges)
@@ -679,7 +742,9 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.
 
 @dataclass
 class FitResult:
-    """Maximum-likelihood fit (:func:`fit_nlopt`).
+    """A maximum-likelihood fit and how far to trust it (:func:`diagnose_fit`).
+
+    Made by :func:`fit_nlopt` and :func:`maximum_likelihood`.
 
     Attributes
     ----------
@@ -688,7 +753,7 @@ class FitResult:
     log_likelihood : float
         The log-likelihood there.
     n_evaluations : int
-        Likelihood evaluations, all starts.
+        Likelihood evaluations, all starts (the global stage's and the diagnosis' included).
     names : tuple of str
         The free parameters' names.
     algorithm : str
@@ -700,7 +765,42 @@ class FitResult:
     seconds : float
         Wall time.
     starts : list of tuple
-        Per start ``(x0, x, log_likelihood)``.
+        Per local start ``(x0, x, log_likelihood)``.
+    sd : numpy.ndarray or None
+        (ndim,) Cramer-Rao standard deviations at ``x``, ``sqrt(diag(inv(fisher)))`` (set by
+        the diagnosis; None where the Fisher information is singular).
+    covariance : numpy.ndarray or None
+        (ndim, ndim) ``inv(fisher)``.
+    fisher : numpy.ndarray or None
+        (ndim, ndim) the Fisher information at ``x`` (:func:`fisher_information`).
+    observed_information : numpy.ndarray or None
+        (ndim, ndim) minus the Hessian of the log-likelihood at ``x`` (central differences
+        with steps of one Cramer-Rao sd).
+    curvature_ratio : tuple of float or None
+        The smallest and largest eigenvalue of ``fisher^(-1/2) observed fisher^(-1/2)``: both
+        near 1 where the likelihood is the Gaussian the Cramer-Rao sd describe.
+    newton_distance : float or None
+        Distance (in Cramer-Rao sd, Mahalanobis) from ``x`` to the maximum of the local
+        quadratic model of the log-likelihood: small at a converged maximum.
+    deviance : float or None
+        ``2 sum [k log(k / lam) - (k - lam)]`` at ``x``.
+    deviance_p : float or None
+        Probability of a deviance at least as large under the fitted model (500 Poisson draws
+        of the expected counts at ``x``; beyond the largest draw, the tail of a normal fitted
+        to them): near 0 when the model cannot explain the data.
+    n_agree : int or None
+        Local starts whose optimum is the best one (log-likelihood within 1 and position
+        within 3 sd), out of ``len(starts)``.
+    alternatives : list of tuple
+        ``(x, log_likelihood)`` of other optima found, more than 3 sd from ``x`` with a
+        log-likelihood within :data:`RIVAL_DELTA_LOG_L` of the best: the data do not decide
+        between them and ``x`` (e.g. attitudes a monostatic profile cannot tell apart).
+    problems : list of str
+        Why the result should not be trusted as it stands (empty when none was found).
+    diagnosed : bool
+        Whether the diagnosis ran.
+    trustworthy : bool
+        ``diagnosed and not problems``.
     """
 
     x: np.ndarray
@@ -712,9 +812,251 @@ class FitResult:
     message: str
     seconds: float
     starts: list[tuple[np.ndarray, np.ndarray, float]] = field(default_factory=list)
+    sd: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    fisher: np.ndarray | None = None
+    observed_information: np.ndarray | None = None
+    curvature_ratio: tuple[float, float] | None = None
+    newton_distance: float | None = None
+    deviance: float | None = None
+    deviance_p: float | None = None
+    n_agree: int | None = None
+    alternatives: list[tuple[np.ndarray, float]] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    diagnosed: bool = False
+
+    @property
+    def trustworthy(self) -> bool:
+        """``diagnosed and not problems``."""
+        return self.diagnosed and not self.problems
 
     def as_dict(self) -> dict[str, float]:
         return dict(zip(self.names, (float(v) for v in self.x)))
+
+    def summary(self) -> str:
+        """A few lines: the estimate with its Cramer-Rao sd, and the diagnosis."""
+        lines = []
+        for i, n in enumerate(self.names):
+            sd = "" if self.sd is None else f" +- {self.sd[i]:.4g}"
+            lines.append(f"{n} = {self.x[i]:.6g}{sd}")
+        lines.append(f"log L = {self.log_likelihood:.2f} ({self.n_evaluations} evaluations, {self.seconds:.1f} s)")
+        if not self.diagnosed:
+            lines.append("not diagnosed")
+        elif self.problems:
+            lines += ["NOT TRUSTWORTHY:"] + [f"  - {p}" for p in self.problems]
+        else:
+            if self.alternatives:
+                lines.append(f"{len(self.alternatives)} other optimum(s) explain the data as well: see alternatives")
+            lines.append(f"trustworthy: {self.n_agree} of {len(self.starts)} start(s) agree; curvature/Fisher "
+                         f"{self.curvature_ratio[0]:.2f}-{self.curvature_ratio[1]:.2f}; deviance p = "  # type: ignore[index]
+                         f"{self.deviance_p:.2f}")
+        return "\n".join(lines)
+
+
+#: Limits of the diagnosis (:func:`diagnose_fit`): the observed information's eigenvalues
+#: in units of the Fisher information, the distance to the quadratic model's maximum (sd),
+#: the deviance p-value, and what counts as a second optimum nearly as likely (log L).
+CURVATURE_RANGE = (0.5, 2.0)
+NEWTON_LIMIT = 0.3
+DEVIANCE_P_LIMIT = 1e-3
+RIVAL_DELTA_LOG_L = 3.0
+
+
+def _deviance(k: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Poisson deviance over the last two axes."""
+    lam = np.maximum(lam, 1e-300)
+    return 2.0 * np.sum(xlogy(k, k / lam) - (k - lam), axis=(-2, -1))
+
+
+def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, seed: int = 0) -> FitResult:
+    """How far to trust a maximum-likelihood fit: a copy of ``result`` with its diagnosis.
+
+    Checks, each adding to :attr:`FitResult.problems` when it fails:
+
+    * the optimum is not on (within one sd of) a bound, where Gaussian uncertainties fail;
+    * the Fisher information is invertible (every parameter constrained);
+    * the observed information (minus the Hessian of ``log L``, central differences with
+      steps of one Cramer-Rao sd) is positive definite (a maximum, not a saddle or a
+      step) and agrees with the Fisher information: eigenvalues of
+      ``F^(-1/2) J F^(-1/2)`` within :data:`CURVATURE_RANGE` (else the Cramer-Rao sd do
+      not describe the likelihood: a rough or non-Gaussian likelihood);
+    * the local quadratic model's maximum lies within :data:`NEWTON_LIMIT` sd (converged);
+    * the model explains the data: deviance p-value above :data:`DEVIANCE_P_LIMIT`
+      (parametric bootstrap, 500 Poisson draws at the optimum, seeded with ``seed``);
+      a failure means a wrong shape, material or instrument, or a missed global optimum;
+
+    Not a problem but reported (:attr:`FitResult.alternatives`, and a
+    :class:`FitWarning`): other optima, more than 3 sd away, whose log-likelihood is within
+    :data:`RIVAL_DELTA_LOG_L` of the best. The data do not decide between them: a monostatic
+    profile cannot tell apart attitudes related by the target's symmetries or by a
+    half turn about the line of sight (co/cross channels), among others. Each is as good an
+    estimate as ``x``; report them all, or add what breaks the tie (a prior, another
+    channel set, a sequence of attitudes).
+
+    Parameters
+    ----------
+    model : ForwardModel
+        The forward model of the fit.
+    measurement : Measurement or array_like
+        The data of the fit.
+    result : FitResult
+        The fit (its ``x`` and ``starts``).
+    seed : int, optional
+        Seed of the deviance draws (default 0).
+
+    Returns
+    -------
+    FitResult
+        A copy with ``sd``, ``covariance``, ``fisher``, ``observed_information``,
+        ``curvature_ratio``, ``newton_distance``, ``deviance``, ``deviance_p``, ``n_agree``,
+        ``alternatives``, ``problems`` and ``diagnosed`` set.
+
+    Raises
+    ------
+    pprender.Error
+        For a model or data that do not match (as :meth:`ForwardModel.log_likelihood`).
+    """
+    if not isinstance(model, ForwardModel):
+        raise Error(f"invalid model of type {type(model).__name__}: expected ForwardModel")
+    k, _ = model._counts(measurement)
+    x = np.asarray(result.x, dtype=np.float64)
+    n = model.ndim
+    problems: list[str] = []
+    out = replace(result, problems=problems, diagnosed=True)
+    n_eval = 0
+    width = model.upper - model.lower
+    room = np.minimum(x - model.lower, model.upper - x)
+    F = None
+    if np.all(room > 1e-9 * width):
+        try:
+            F = fisher_information(model, x)
+            n_eval += 2 * n + 1
+        except Error as e:
+            problems.append(f"no Fisher information at the optimum: {e}")
+    cov = None
+    if F is not None:
+        w, V = np.linalg.eigh(0.5 * (F + F.T))
+        if not (np.all(np.isfinite(w)) and w.min() > 1e-12 * max(w.max(), 1e-300)):
+            weak = [model.names[i] for i in np.flatnonzero(np.abs(V[:, 0]) > 0.3)]
+            problems.append(f"the Fisher information is singular: the data do not constrain {weak} (degenerate parameters)")
+        else:
+            cov = (V / w) @ V.T
+            out.fisher, out.covariance, out.sd = F, cov, np.sqrt(np.diag(cov))
+    else:
+        at = [model.names[i] for i in np.flatnonzero(room <= 1e-9 * width)]
+        problems.append(f"the optimum is on the bound(s) of {at}: widen the bounds, or the data prefer a value outside them")
+    if cov is not None:
+        sd = out.sd
+        assert sd is not None and F is not None
+        near = [model.names[i] for i in np.flatnonzero(room < sd)]
+        if near:
+            problems.append(f"the optimum is within one sd of the bound(s) of {near}: the Gaussian uncertainties do not hold there")
+        h = np.minimum(sd, 0.999 * room)
+        if np.all(h > 0):
+            # Hessian by central differences, one batch: x, x +- h_i e_i, x +- h_i e_i +- h_j e_j
+            pts = [x]
+            for i in range(n):
+                for sg in (1.0, -1.0):
+                    p = x.copy()
+                    p[i] += sg * h[i]
+                    pts.append(p)
+            pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+            for i, j in pairs:
+                for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                    p = x.copy()
+                    p[i] += si * h[i]
+                    p[j] += sj * h[j]
+                    pts.append(p)
+            ll = model.log_likelihood(np.array(pts), measurement)
+            n_eval += len(pts)
+            if not np.all(np.isfinite(ll)):
+                problems.append("the log-likelihood is not finite within one sd of the optimum")
+            else:
+                H = np.zeros((n, n))
+                g = np.zeros(n)
+                for i in range(n):
+                    lp, lm = ll[1 + 2 * i], ll[2 + 2 * i]
+                    H[i, i] = (lp - 2 * ll[0] + lm) / h[i] ** 2
+                    g[i] = (lp - lm) / (2 * h[i])
+                base = 1 + 2 * n
+                for m, (i, j) in enumerate(pairs):
+                    a, b, c, d = ll[base + 4 * m: base + 4 * m + 4]
+                    H[i, j] = H[j, i] = (a - b - c + d) / (4 * h[i] * h[j])
+                J = -H
+                out.observed_information = J
+                L = np.linalg.cholesky(F)
+                Li = np.linalg.inv(L)
+                ev = np.linalg.eigvalsh(Li @ J @ Li.T)
+                out.curvature_ratio = (float(ev.min()), float(ev.max()))
+                if ev.min() <= 0:
+                    problems.append(
+                        "not a maximum: the log-likelihood curves upward along some direction within one sd "
+                        f"(curvature/Fisher eigenvalues {ev.min():.2g} to {ev.max():.2g}): a saddle, a step of a "
+                        "rough likelihood, or a stop before convergence"
+                    )
+                else:
+                    if ev.min() < CURVATURE_RANGE[0] or ev.max() > CURVATURE_RANGE[1]:
+                        problems.append(
+                            f"the curvature of log L differs from the Fisher information (eigenvalues {ev.min():.2f} "
+                            f"to {ev.max():.2f} of it, expected within {CURVATURE_RANGE}): the Cramer-Rao sd do not "
+                            "describe this likelihood (rough, non-Gaussian, or a model that does not fit)"
+                        )
+                    step = np.linalg.solve(J, g)
+                    dist = float(np.sqrt(step @ F @ step))
+                    out.newton_distance = dist
+                    if dist > NEWTON_LIMIT:
+                        problems.append(
+                            f"not converged: the maximum of the local quadratic model lies {dist:.2f} sd from the "
+                            f"optimum, at {np.round(x + step, 6).tolist()}"
+                        )
+    # goodness of fit
+    lam = model.expected(x) if np.all(np.isfinite(model.log_prior(x))) else None
+    n_eval += 1
+    if lam is not None:
+        D = float(_deviance(k, lam))
+        rng = np.random.default_rng(seed)
+        sims = _deviance(rng.poisson(lam[None], size=(500,) + lam.shape).astype(np.float64), lam[None])
+        above = int(np.sum(sims >= D))
+        # beyond the draws, the tail of a normal fitted to them (the deviance of many bins
+        # is near normal); the empirical p-value cannot go below 1 / 501
+        p_value = float(above / len(sims)) if above else float(norm.sf((D - sims.mean()) / max(sims.std(), 1e-300)))
+        out.deviance, out.deviance_p = D, p_value
+        if p_value < DEVIANCE_P_LIMIT:
+            problems.append(
+                f"the model does not fit the data: deviance {D:.1f} against {sims.mean():.1f} +- {sims.std():.1f} "
+                f"expected (p = {p_value:.1g}): a wrong shape, material or instrument, or a missed global optimum"
+            )
+    # agreement of the starts, and other optima that explain the data as well
+    alternatives: list[tuple[np.ndarray, float]] = []
+    agree = 0
+    for _, xs, lls in sorted(result.starts, key=lambda t: -t[2]):
+        if not math.isfinite(lls):
+            continue
+        dx = xs - x
+        sep = float(np.sqrt(dx @ out.fisher @ dx)) if out.fisher is not None else float(np.max(np.abs(dx) / width) * 1e3)
+        if result.log_likelihood - lls < 1.0 and sep < 3.0:
+            agree += 1
+        elif sep >= 3.0 and result.log_likelihood - lls < RIVAL_DELTA_LOG_L:
+            if all(np.max(np.abs(xs - a) / width) > 1e-3 for a, _ in alternatives):
+                alternatives.append((xs, float(lls)))
+    out.n_agree = max(agree, 1)
+    out.alternatives = alternatives
+    out.n_evaluations = result.n_evaluations + n_eval
+    return out
+
+
+def _warn_untrustworthy(result: FitResult, what: str) -> None:
+    import warnings
+
+    if result.problems:
+        warnings.warn(f"{what}: the result is not trustworthy: " + "; ".join(result.problems), FitWarning, stacklevel=3)
+    if result.alternatives:
+        alt = "; ".join(f"{np.round(a, 6).tolist()} (log L {ll - result.log_likelihood:+.2f})" for a, ll in result.alternatives)
+        warnings.warn(
+            f"{what}: {len(result.alternatives)} other optimum(s) explain the data as well as {np.round(result.x, 6).tolist()}: "
+            f"{alt}. The data do not decide between them (FitResult.alternatives)",
+            FitWarning, stacklevel=3,
+        )
 
 
 _ALGORITHMS = ("BOBYQA", "NELDERMEAD", "COBYLA")
@@ -755,8 +1097,13 @@ def fit_nlopt(
     initial_step: Any = None,
     n_starts: int = 1,
     seed: int | None = None,
+    diagnose: bool = True,
 ) -> FitResult:
-    """Maximum-likelihood fit with a derivative-free nlopt algorithm.
+    """Maximum-likelihood fit with a derivative-free nlopt algorithm, from given starts.
+
+    A local optimizer: it finds the maximum whose basin holds a start.
+    :func:`maximum_likelihood` is the robust fit (a global stage, several local starts,
+    the diagnosis); this is its local stage, for a start known to be close.
 
     No gradients are offered: the renderer rasterizes the target, so the expected counts
     are piecewise smooth in the attitude and scale (they step when a silhouette edge
@@ -791,16 +1138,25 @@ def fit_nlopt(
         with ``numpy.random.default_rng(seed)``; the best optimum is returned. Default 1.
     seed : int, optional
         Seed of the further starts, an integer >= 0 (default None).
+    diagnose : bool, optional
+        Diagnose the optimum (:func:`diagnose_fit`: about ``2 ndim^2 + 2 ndim + 2`` more
+        renders) and warn (:class:`FitWarning`) when it is not trustworthy. Default True.
 
     Returns
     -------
     FitResult
-        The best start's optimum, with every start in ``starts``.
+        The best start's optimum, with every start in ``starts`` and, with ``diagnose``,
+        its uncertainty and diagnosis.
 
     Raises
     ------
     pprender.Error
         For bad arguments, and when the log-likelihood is ``-inf`` everywhere tried.
+
+    Warns
+    -----
+    FitWarning
+        With ``diagnose``, when the diagnosis finds problems (:attr:`FitResult.problems`).
 
     Notes
     -----
@@ -811,8 +1167,6 @@ def fit_nlopt(
     instead. A start that never found a finite value is kept in ``starts`` with
     ``log_likelihood = -inf``; the best start is returned.
     """
-    import nlopt
-
     if not isinstance(model, ForwardModel):
         raise Error(f"invalid model of type {type(model).__name__}: expected ForwardModel")
     algo = str(algorithm).upper().replace("-", "").replace("_", "")
@@ -836,13 +1190,27 @@ def fit_nlopt(
         raise Error(f"invalid seed = {seed!r}: an integer >= 0 or None")
     rng = np.random.default_rng(seed)
     starts = [x0] + [model.lower + width * rng.random(model.ndim) for _ in range(n_starts - 1)]
-    code = getattr(nlopt, {"BOBYQA": "LN_BOBYQA", "NELDERMEAD": "LN_NELDERMEAD", "COBYLA": "LN_COBYLA"}[algo])
     t0 = time.perf_counter()
+    result = _local_fits(model, measurement, starts, algo, ftol, xtol, int(maxeval), step)
+    result.seconds = time.perf_counter() - t0
+    if diagnose:
+        result = diagnose_fit(model, measurement, result)
+        result.seconds = time.perf_counter() - t0
+        _warn_untrustworthy(result, "fit_nlopt")
+    return result
+
+
+def _local_fits(model: ForwardModel, measurement: Any, starts: Sequence[np.ndarray], algo: str, ftol: float,
+                xtol: np.ndarray, maxeval: int, step: np.ndarray) -> FitResult:
+    """nlopt from every start; the best optimum, with every start's (module docstring)."""
+    import nlopt
+
+    code = getattr(nlopt, {"BOBYQA": "LN_BOBYQA", "NELDERMEAD": "LN_NELDERMEAD", "COBYLA": "LN_COBYLA"}[algo])
     n_eval = 0
     results = []
     best: tuple[float, np.ndarray, int] | None = None
     for start in starts:
-        state = {"best": -np.inf, "x": start.copy(), "n": 0}
+        state: dict[str, Any] = {"best": -np.inf, "x": np.array(start, dtype=np.float64), "n": 0}
 
         def objective(x: np.ndarray, grad: np.ndarray) -> float:
             ll = model.log_likelihood(np.array(x, dtype=np.float64), measurement)
@@ -860,7 +1228,7 @@ def fit_nlopt(
         opt.set_maxeval(int(maxeval))
         opt.set_initial_step(np.asarray(step, float).tolist())
         try:
-            opt.optimize(start.tolist())
+            opt.optimize(np.asarray(start, float).tolist())
             rc = int(opt.last_optimize_result())
         except nlopt.RoundoffLimited:
             rc = -4
@@ -869,15 +1237,15 @@ def fit_nlopt(
             if state["n"] == 0:
                 raise Error(f"nlopt failed before any evaluation: {e}") from None
         n_eval += state["n"]
-        results.append((start, state["x"], float(state["best"])))
+        results.append((np.asarray(start, float), state["x"], float(state["best"])))
         if best is None or state["best"] > best[0]:
             best = (float(state["best"]), state["x"], rc)
     assert best is not None
     if not math.isfinite(best[0]):
         raise Error(
-            f"fit_nlopt found no fit: the log-likelihood is -inf at every one of the {n_eval} points tried "
-            f"({len(starts)} start(s) from x0 = {x0.tolist()}), so there is nothing to maximize and x0 is "
-            "not an estimate. Usually the counts are impossible under the model: counts recorded in bins "
+            f"the fit found nothing: the log-likelihood is -inf at every one of the {n_eval} points tried "
+            f"({len(starts)} start(s) from {np.asarray(starts[0]).tolist()}), so there is nothing to maximize and the "
+            "start is not an estimate. Usually the counts are impossible under the model: counts recorded in bins "
             "where it expects none (zero expected counts and no background; check that bin_edges cover "
             "the target's range window and that the instrument's background_rate is right), or no "
             "material can be built within the bounds"
@@ -890,12 +1258,337 @@ def fit_nlopt(
         algorithm=algo,
         return_code=best[2],
         message=_NLOPT_MESSAGES.get(best[2], "unknown"),
-        seconds=time.perf_counter() - t0,
+        seconds=0.0,
         starts=results,
     )
 
 
+def _unit_sobol(n: int, d: int, seed: int) -> np.ndarray:
+    from scipy.stats import qmc
+
+    return qmc.Sobol(d, scramble=True, seed=seed).random(n)
+
+
+def _global_points(model: ForwardModel, n: int, seed: int) -> np.ndarray:
+    """``n`` points spread over the bounds: an SO(3) grid for a free rotation (all three of
+    ``rx, ry, rz``), scrambled Sobol' points otherwise (and for the other parameters)."""
+    from . import so3
+
+    width = model.upper - model.lower
+    pts = model.lower + width * _unit_sobol(n, model.ndim, seed)
+    rot = [model.names.index(p) for p in ("rx", "ry", "rz") if p in model.names]
+    if len(rot) == 3:
+        # many more grid rotations than points: keep those inside the bounds
+        for m in (n, 4 * n, 16 * n, 64 * n):
+            q = so3.grid(m)
+            R = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
+            ref = model.reference_attitude
+            E = R @ ref.T if model.attitude_frame == "telescope" else ref.T @ R
+            r = Rotation.from_matrix(E).as_rotvec()
+            ok = np.all((r >= model.lower[rot]) & (r <= model.upper[rot]), axis=1)
+            if ok.sum() >= n:
+                pick = np.flatnonzero(ok)
+                pick = pick[np.linspace(0, len(pick) - 1, n).round().astype(int)]
+                pts[:, rot] = r[pick]
+                break
+    return pts
+
+
+def attitude_starts(model: ForwardModel, attitudes: Any, x0: Any = None) -> np.ndarray:
+    """Start points (n, ndim) of ``model`` at given attitudes.
+
+    E.g. a classifier's best candidates (``Classifier.top_k(data, k).attitude[0]``).
+
+    The rotation vector is ``log(R R_ref^T)`` (``attitude_frame="telescope"``) or
+    ``log(R_ref^T R)`` (``"body"``); its free components are kept (fixed ones stay fixed,
+    so an attitude is projected onto the free ones), clipped into the bounds. The other
+    free parameters take ``x0``'s values, or the middle of their bounds.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        The forward model.
+    attitudes : array_like or scipy.spatial.transform.Rotation
+        (n, 4) quaternions ``(w, x, y, z)``, (n, 3, 3) matrices or a Rotation (body to
+        telescope, as :func:`pprender.render`).
+    x0 : array_like, optional
+        (ndim,) values of the other free parameters.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, ndim) start points within the bounds.
+
+    Raises
+    ------
+    pprender.Error
+        For attitudes that are not rotations, or an ``x0`` of the wrong shape or outside
+        the bounds.
+    """
+    R = _attitude_matrices(attitudes, "attitudes").reshape(-1, 3, 3)
+    ref = model.reference_attitude
+    E = R @ ref.T if model.attitude_frame == "telescope" else ref.T @ R
+    r = Rotation.from_matrix(E).as_rotvec()
+    base = 0.5 * (model.lower + model.upper) if x0 is None else _x0(model, x0)
+    pts = np.repeat(base[None], len(R), axis=0)
+    for j, p in enumerate(("rx", "ry", "rz")):
+        if p in model.names:
+            pts[:, model.names.index(p)] = r[:, j]
+    return np.clip(pts, model.lower, model.upper)
+
+
+def maximum_likelihood(
+    model: ForwardModel,
+    measurement: Any,
+    x0: Any = None,
+    *,
+    starts: Any = None,
+    n_global: int | None = None,
+    n_local: int = 8,
+    algorithm: str = "BOBYQA",
+    maxeval: int = 2000,
+    ftol_abs: float = 1e-6,
+    seed: int = 0,
+    diagnose: bool = True,
+) -> FitResult:
+    """The robust maximum-likelihood fit: a global stage, local fits, a diagnosis.
+
+    1. **Global stage.** The log-likelihood is evaluated, in batches (one render call per
+       batch), at ``x0`` (if given), at every point of ``starts`` (e.g. a classifier's best
+       candidates through :func:`attitude_starts`) and at ``n_global`` points spread over
+       the bounds (an SO(3) grid when ``rx, ry, rz`` are all free, scrambled Sobol' points
+       otherwise, seeded with ``seed``).
+    2. **Local stage.** :func:`fit_nlopt`'s optimizer from the ``n_local`` best of them that
+       lie apart (more than the global points' spacing), with an initial step of half that
+       spacing, plus ``x0`` and every ``starts`` point; the best optimum wins.
+    3. **Diagnosis** (:func:`diagnose_fit`): Cramer-Rao uncertainties, the curvature of
+       ``log L`` against the Fisher information, convergence, goodness of fit and the
+       agreement of the local starts; a :class:`FitWarning` when it finds problems.
+
+    The likelihood is continuous in the attitude with the model's default settings
+    (:class:`ForwardModel`, analytic coverage): local optimizers then converge from
+    anywhere in the basin of the maximum.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        The forward model.
+    measurement : Measurement or array_like
+        The data: a :class:`Measurement` or counts (B, C).
+    x0 : array_like, optional
+        (ndim,) a first guess, inside the bounds.
+    starts : array_like, optional
+        (n, ndim) further candidate starts inside the bounds.
+    n_global : int, optional
+        Points of the global stage, an integer in [0, 100000] (default ``128 * ndim``; 0
+        skips it, then ``x0`` or ``starts`` are needed).
+    n_local : int, optional
+        Local fits from the global stage's best points, in [1, 64]. Default 8: PPR
+        likelihoods often have several optima nearly as likely (docs/fit-recovery.md: with
+        4 local fits from 192 points, 2 of 3 truths' modes were never visited).
+    algorithm : {"BOBYQA", "NELDERMEAD", "COBYLA"}, optional
+        The local optimizer (:func:`fit_nlopt`). Default ``"BOBYQA"``.
+    maxeval : int, optional
+        Likelihood evaluations per local fit, >= 1. Default 2000.
+    ftol_abs : float, optional
+        Local fits stop when ``log L`` changes by less (default 1e-6).
+    seed : int, optional
+        Seed of the global points and of the diagnosis' draws, >= 0. Default 0.
+    diagnose : bool, optional
+        Run the diagnosis (default True).
+
+    Returns
+    -------
+    FitResult
+        The best optimum, every local start in ``starts``, and the diagnosis
+        (``trustworthy``, ``problems``, ``sd``).
+
+    Raises
+    ------
+    pprender.Error
+        For bad arguments, and when the log-likelihood is ``-inf`` everywhere tried.
+
+    Warns
+    -----
+    FitWarning
+        When the diagnosis finds problems.
+    """
+    if not isinstance(model, ForwardModel):
+        raise Error(f"invalid model of type {type(model).__name__}: expected ForwardModel")
+    algo = str(algorithm).upper().replace("-", "").replace("_", "")
+    if algo not in _ALGORITHMS:
+        raise Error(f"invalid algorithm = {algorithm!r}: one of {_ALGORITHMS}")
+    model._counts(measurement)
+    d = model.ndim
+    n_glob = 128 * d if n_global is None else n_global
+    for name, v, lo, hi in (("n_global", n_glob, 0, 100_000), ("n_local", n_local, 1, 64),
+                            ("maxeval", maxeval, 1, 10**9), ("seed", seed, 0, 2**63 - 1)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+            raise Error(f"invalid {name} = {v!r}: an integer in [{lo}, {hi}]")
+    ftol = _check_number("ftol_abs", ftol_abs, 0.0, math.inf, False, True, "log-likelihood units")
+    given: list[np.ndarray] = []
+    if x0 is not None:
+        given.append(_x0(model, x0))
+    if starts is not None:
+        st = _numeric_array(starts, "starts", f"start points (n, {d}) for {model.names}")
+        st = np.atleast_2d(st)
+        if st.ndim != 2 or st.shape[1] != d:
+            raise Error(f"invalid starts: shape {np.shape(starts)}, expected (n, {d}) for {model.names}")
+        bad = ~np.all(np.isfinite(st) & (st >= model.lower) & (st <= model.upper), axis=1)
+        if np.any(bad):
+            raise Error(f"invalid starts: rows {np.flatnonzero(bad)[:10].tolist()} lie outside the bounds {model.bounds.tolist()}")
+        given += list(st)
+    if n_glob == 0 and not given:
+        raise Error("invalid n_global = 0 without x0 or starts: nothing to start from")
+    t0 = time.perf_counter()
+    width = model.upper - model.lower
+    spacing = width * max(n_glob, 1) ** (-1.0 / d)
+    local: list[np.ndarray] = list(given)
+    n_eval = 0
+    if n_glob > 0:
+        pts = _global_points(model, n_glob, seed)
+        ll = np.concatenate([model.log_likelihood(pts[i:i + 256], measurement) for i in range(0, len(pts), 256)])
+        n_eval += len(pts)
+        order = np.argsort(-ll)
+        chosen: list[np.ndarray] = []
+        for i in order:
+            if not math.isfinite(ll[i]) or len(chosen) >= n_local:
+                break
+            if all(np.max(np.abs(pts[i] - c) / spacing) > 1.0 for c in chosen):
+                chosen.append(pts[i])
+        local += chosen
+    step = 0.5 * spacing if n_glob > 0 else 0.05 * width
+    result = _local_fits(model, measurement, local, algo, ftol, 1e-8 * width, int(maxeval), step)
+    result.n_evaluations += n_eval
+    result.seconds = time.perf_counter() - t0
+    if diagnose:
+        result = diagnose_fit(model, measurement, result, seed=seed)
+        result.seconds = time.perf_counter() - t0
+        _warn_untrustworthy(result, "maximum_likelihood")
+    return result
+
+
 # ---------------------------------------------------------------------- emcee
+
+
+@dataclass
+class ChainSummary:
+    """An emcee chain's estimates and whether they can be trusted (:func:`chain_summary`).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The parameters.
+    mean, sd, median : numpy.ndarray
+        (ndim,) posterior mean, standard deviation and median of the kept samples.
+    tau : numpy.ndarray
+        (ndim,) integrated autocorrelation times (steps), emcee's estimate.
+    acceptance : float
+        Mean acceptance fraction over the walkers.
+    n_steps, discard : int
+        Steps run, and steps discarded as burn-in.
+    n_effective : float
+        Independent samples, about ``walkers * (n_steps - discard) / max(tau)``.
+    problems : list of str
+        Why the estimates should not be trusted (empty when none was found).
+    """
+
+    names: tuple[str, ...]
+    mean: np.ndarray
+    sd: np.ndarray
+    median: np.ndarray
+    tau: np.ndarray
+    acceptance: float
+    n_steps: int
+    discard: int
+    n_effective: float
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        """No problems found."""
+        return not self.problems
+
+
+#: A chain is long enough when it spans this many autocorrelation times (emcee's advice).
+TAU_MULTIPLE = 50
+#: Mean acceptance fractions outside this range mean a badly tuned ensemble (the stretch
+#: move accepts about 0.7 of its proposals on a 2D Gaussian, less in more dimensions;
+#: below 0.15 walkers are stuck or the posterior is multimodal).
+ACCEPTANCE_RANGE = (0.15, 0.9)
+
+
+def chain_summary(sampler: Any, names: Sequence[str] | None = None, discard: int | None = None) -> ChainSummary:
+    """Posterior estimates of an emcee sampler (:func:`sample_emcee`) and its diagnosis.
+
+    Problems reported: a chain shorter than :data:`TAU_MULTIPLE` autocorrelation times
+    (its estimates, the sd most of all, are then unreliable), a mean acceptance fraction
+    outside :data:`ACCEPTANCE_RANGE`, and stuck walkers (acceptance below 0.02).
+
+    Parameters
+    ----------
+    sampler : emcee.EnsembleSampler
+        The sampler after its run.
+    names : sequence of str, optional
+        Parameter names (default ``p0, p1, ...``).
+    discard : int, optional
+        Burn-in steps dropped, in [0, n_steps) (default ``3 * max(tau)`` of the whole chain,
+        at most half of it).
+
+    Returns
+    -------
+    ChainSummary
+        Estimates, autocorrelation times, acceptance and problems.
+
+    Raises
+    ------
+    pprender.Error
+        For a sampler without steps, or a ``discard`` out of range.
+    """
+    import emcee
+
+    chain = np.asarray(sampler.get_chain())
+    if chain.ndim != 3 or chain.shape[0] < 1:
+        raise Error("invalid sampler: it has run no steps")
+    n_steps, n_walkers, d = chain.shape
+    names_t = tuple(names) if names is not None else tuple(f"p{i}" for i in range(d))
+    if len(names_t) != d:
+        raise Error(f"invalid names: {len(names_t)} names for {d} parameters")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau_all = emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
+    t_all = float(np.max(tau_all)) if np.all(np.isfinite(tau_all)) else math.inf
+    if discard is None:
+        disc = int(min(n_steps // 2, math.ceil(3 * t_all))) if math.isfinite(t_all) else n_steps // 2
+    else:
+        if isinstance(discard, (bool, np.bool_)) or not isinstance(discard, (int, np.integer)) or not 0 <= discard < n_steps:
+            raise Error(f"invalid discard = {discard!r}: an integer in [0, {n_steps})")
+        disc = int(discard)
+    kept = chain[disc:]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau = emcee.autocorr.integrated_time(kept, tol=0, quiet=True) if len(kept) > 1 else tau_all
+    flat = kept.reshape(-1, d)
+    acc = np.asarray(sampler.acceptance_fraction)
+    problems = []
+    tmax = float(np.max(tau)) if np.all(np.isfinite(tau)) else math.inf
+    if not math.isfinite(tmax):
+        problems.append("the autocorrelation time cannot be estimated (a parameter never moved): run longer")
+    elif n_steps < TAU_MULTIPLE * tmax:
+        problems.append(
+            f"the chain is short: {n_steps} steps for autocorrelation times up to {tmax:.1f} steps (at least "
+            f"{TAU_MULTIPLE} x that are needed; tau itself is then underestimated): run longer"
+        )
+    if not ACCEPTANCE_RANGE[0] <= acc.mean() <= ACCEPTANCE_RANGE[1]:
+        problems.append(f"mean acceptance {acc.mean():.2f} outside {ACCEPTANCE_RANGE}: the ensemble is badly tuned")
+    stuck = int(np.sum(acc < 0.02))
+    if stuck:
+        problems.append(f"{stuck} of {n_walkers} walkers accepted under 2% of their moves (stuck)")
+    return ChainSummary(
+        names=names_t, mean=flat.mean(axis=0), sd=flat.std(axis=0, ddof=1) if len(flat) > 1 else np.full(d, np.nan),
+        median=np.median(flat, axis=0), tau=np.asarray(tau, dtype=np.float64), acceptance=float(acc.mean()),
+        n_steps=int(n_steps), discard=disc,
+        n_effective=float(n_walkers * (n_steps - disc) / max(tmax, 1.0)) if math.isfinite(tmax) else 0.0,
+        problems=problems,
+    )
 
 
 def sample_emcee(
@@ -909,6 +1602,7 @@ def sample_emcee(
     spread: Any = 1e-3,
     progress: bool = False,
     moves: Any = None,
+    check: bool = True,
 ) -> Any:
     """Sample the posterior (:meth:`ForwardModel.log_prob`) with ``emcee``.
 
@@ -938,11 +1632,20 @@ def sample_emcee(
         Show emcee's progress bar. Default False.
     moves : object, optional
         Passed to :class:`emcee.EnsembleSampler` (default None: emcee's default).
+    check : bool, optional
+        After the run, diagnose the chain (:func:`chain_summary`) and warn
+        (:class:`FitWarning`) when it is too short for its autocorrelation time or its
+        acceptance is off. Default True.
 
     Returns
     -------
     emcee.EnsembleSampler
         The sampler after ``n_steps`` steps (chains via ``get_chain(discard=..., flat=True)``).
+
+    Warns
+    -----
+    FitWarning
+        With ``check``, for a chain too short or badly tuned (:func:`chain_summary`).
 
     Raises
     ------
@@ -990,4 +1693,10 @@ def sample_emcee(
                                     vectorize=True, moves=moves)
     state = emcee.State(p0, log_prob=lp0, random_state=np.random.RandomState(int(seed)).get_state())
     sampler.run_mcmc(state, int(n_steps), progress=progress)
+    if check:
+        summary = chain_summary(sampler, model.names)
+        if summary.problems:
+            import warnings
+
+            warnings.warn("sample_emcee: " + "; ".join(summary.problems), FitWarning, stacklevel=2)
     return sampler
