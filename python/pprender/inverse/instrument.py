@@ -77,6 +77,7 @@ background counts summed over all bins and channels.
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
@@ -84,6 +85,7 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.special import erfc
 
+from .. import _io
 from .._core import Error
 from ..lidar import SPEED_OF_LIGHT, RenderResult
 
@@ -118,6 +120,10 @@ class PileUpWarning(UserWarning):
     measurement (module docstring).
     """
 
+
+#: Version of the saved layout (:meth:`Measurement.to_xarray`); files of a newer version
+#: are refused.
+FORMAT_VERSION = 1
 
 # Largest mean numpy's Poisson sampler accepts (int64 counts; its limit is 9.2234e18).
 _POISSON_MAX = 9.2e18
@@ -778,6 +784,12 @@ class Measurement:
         (B,) round-trip delays ``2 r / c`` (s).
     snr : float or numpy.ndarray
         :func:`snr` of each measurement (a float, or an array over the leading axes).
+
+    Notes
+    -----
+    :meth:`save` and :meth:`load` keep a measurement, its instrument included, in a Zarr
+    v3 store (``.zarr``) or a netCDF file (``.nc``), exactly; :meth:`to_xarray` gives the
+    same layout as an :class:`xarray.Dataset`.
     """
 
     counts: np.ndarray
@@ -820,6 +832,231 @@ class Measurement:
             instrument=self.instrument,
             seed=self.seed,
         )
+
+    # ------------------------------------------------------------------ saving
+
+    def to_xarray(self) -> Any:
+        """The measurement as an :class:`xarray.Dataset` with named dimensions, units and metadata.
+
+        Layout (``B`` range bins, ``C`` channels):
+
+        * dimensions: the leading (attitude) axes, ``attitude`` for one and
+          ``attitude_0``, ``attitude_1``, ... for several, each with an index coordinate;
+          ``range`` (bin centres, m, with ``time`` ``2 r / c`` in s); ``range_edge`` (the
+          ``bin_edges`` coordinate, ``B + 1``, m); ``channel`` (the channel names);
+        * variables: ``counts`` (int64), ``expected`` and ``signal`` (leading axes,
+          ``range, channel``), ``background`` (``range, channel``), in counts;
+        * attributes (a saved file adds ``created``, UTC): ``format``
+          (``pprender.Measurement/1``), ``pprender_version``,
+          ``wavelength`` (m, the instrument's), and as JSON text ``instrument`` (every
+          :class:`Instrument` field, its :class:`Channels` in full), ``seed`` and
+          ``extra``.
+
+        Each variable keeps its NumPy dtype (``pprender_dtype`` attribute), so that
+        :meth:`from_xarray` gives back the same arrays bit for bit and an equal
+        :class:`Instrument`.
+
+        Returns
+        -------
+        xarray.Dataset
+            The dataset (in memory).
+
+        Raises
+        ------
+        pprender.Error
+            Naming the field, for arrays whose shapes disagree (``counts``, ``expected``
+            and ``signal`` alike, ``background`` ``(B, C)``, ``bin_edges`` ``(B + 1,)``,
+            ``channel_names`` ``(C,)``), an ``instrument`` that is not an
+            :class:`Instrument`, a ``seed`` that is not an int or None, or an ``extra``
+            value that cannot be stored as JSON (naming its key).
+        """
+        xr = _io._xarray()
+        k = np.asarray(self.counts)
+        if k.ndim < 2:
+            raise Error(f"invalid Measurement.counts: shape {k.shape}, expected (..., B, C)")
+        b, c = k.shape[-2:]
+        for fname, want in (("expected", k.shape), ("signal", k.shape), ("background", (b, c)),
+                            ("bin_edges", (b + 1,))):
+            a = np.asarray(getattr(self, fname))
+            if a.shape != want:
+                raise Error(f"invalid Measurement.{fname}: shape {a.shape}, expected {want} (from counts {k.shape})")
+        names = tuple(self.channel_names)
+        if len(names) != c or not all(isinstance(n, str) for n in names):
+            raise Error(f"invalid Measurement.channel_names = {names!r}: {c} str, one per channel")
+        if not isinstance(self.instrument, Instrument):
+            raise Error(
+                f"invalid Measurement.instrument of type {type(self.instrument).__name__}: expected an Instrument"
+            )
+        seed = self.seed
+        if seed is not None and (isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer))):
+            raise Error(f"invalid Measurement.seed = {seed!r}: an int or None")
+        n_lead = k.ndim - 2
+        lead = ("attitude",) if n_lead == 1 else tuple(f"attitude_{i}" for i in range(n_lead))
+        dims = lead + ("range", "channel")
+        edges = np.asarray(self.bin_edges)
+        r = 0.5 * (edges[1:] + edges[:-1])
+        coords: dict[str, Any] = {
+            "channel": ("channel", np.array(names, dtype=object), {"long_name": "polarization channel"}),
+            "bin_edges": _io.variable(("range_edge",), edges, {"units": "m", "long_name": "range bin edges"}),
+            "range": ("range", r, {"units": "m", "long_name": "range bin centre relative to the body origin, positive away from the sensor"}),
+            "time": ("range", 2.0 * r / SPEED_OF_LIGHT, {"units": "s", "long_name": "round-trip delay of the range bin centre, 2 range / c"}),
+        }
+        for d, n in zip(lead, k.shape[:-2]):
+            coords[d] = (d, np.arange(n), {"long_name": "attitude index"})
+        counts_units = {"units": "1"}
+        data_vars = {
+            "counts": _io.variable(dims, k, {**counts_units, "long_name": "detected counts (Poisson draws)"}),
+            "expected": _io.variable(dims, self.expected, {**counts_units, "long_name": "expected counts, signal + background"}),
+            "signal": _io.variable(dims, self.signal, {**counts_units, "long_name": "expected signal counts"}),
+            "background": _io.variable(("range", "channel"), self.background, {**counts_units, "long_name": "expected background counts"}),
+        }
+        attrs = _io.base_attrs(
+            "Measurement", FORMAT_VERSION, "pprender measurement",
+            "SI units; counts are detected photo-electrons; link budget and channels as in "
+            "pprender.instrument (its module docstring)",
+        )
+        attrs.update(
+            wavelength=float(self.instrument.wavelength),
+            wavelength_units="m",
+            instrument=_io.to_json(_instrument_params(self.instrument), "Measurement.instrument"),
+            seed=_io.to_json(None if seed is None else int(seed), "Measurement.seed"),
+            extra=_io.extra_json(self.extra, "Measurement"),
+        )
+        return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+    @classmethod
+    def from_xarray(cls, ds: Any) -> "Measurement":
+        """The measurement a dataset of :meth:`to_xarray` holds (exactly the one saved).
+
+        Parameters
+        ----------
+        ds : xarray.Dataset
+            A dataset made by :meth:`to_xarray` (or read from a file :meth:`save` wrote).
+
+        Returns
+        -------
+        Measurement
+            The measurement, its :class:`Instrument` equal to the original.
+
+        Raises
+        ------
+        pprender.Error
+            For something that is not an :class:`xarray.Dataset` of a pprender
+            Measurement, one written by a newer pprender (a newer format version), or one
+            missing a variable or attribute of the layout, or whose instrument is invalid.
+        """
+        xr = _io._xarray()
+        if not isinstance(ds, xr.Dataset):
+            raise Error(f"invalid ds of type {type(ds).__name__}: expected an xarray.Dataset")
+        where = "ds"
+        _io.check_format(ds.attrs, "Measurement", FORMAT_VERSION, where)
+        if "counts" not in ds.variables:
+            raise Error(f"invalid {where}: no variable 'counts'")
+        lead = tuple(d for d in ds["counts"].dims if d not in ("range", "channel"))
+        dims = lead + ("range", "channel")
+        params = _io.from_json(ds.attrs, "instrument", where)
+        try:
+            instrument = _instrument_from_params(params)
+        except (KeyError, TypeError) as e:
+            raise Error(f"invalid {where}: attribute 'instrument' is incomplete ({e})") from None
+        if "channel" not in ds.variables:
+            raise Error(f"invalid {where}: no coordinate 'channel'")
+        return cls(
+            counts=_io.array(ds, "counts", dims, where),
+            expected=_io.array(ds, "expected", dims, where),
+            signal=_io.array(ds, "signal", dims, where),
+            background=_io.array(ds, "background", ("range", "channel"), where),
+            bin_edges=_io.array(ds, "bin_edges", ("range_edge",), where),
+            channel_names=tuple(str(n) for n in np.asarray(ds["channel"].values)),
+            instrument=instrument,
+            seed=_io.from_json(ds.attrs, "seed", where),
+            extra=dict(_io.from_json(ds.attrs, "extra", where)),
+        )
+
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> None:
+        """Save the measurement to ``path``: a Zarr v3 store (``.zarr``) or a netCDF file (``.nc``).
+
+        The layout is :meth:`to_xarray`'s; :meth:`load` gives back an equal measurement
+        (arrays bit for bit, an equal :class:`Instrument`), which :mod:`pprender.fit` uses
+        exactly as the original. The file is written beside ``path`` and renamed into
+        place. A netCDF file is read back and checked before it is put in place: data the
+        installed netCDF engine cannot store exactly (with scipy's netCDF3, counts above
+        2**31 - 1) is refused (save as ``.zarr``).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            Where to save; its suffix, ``.zarr`` or ``.nc``, picks the format.
+        overwrite : bool, optional
+            Replace a saved RenderResult or Measurement at ``path`` (default False: an
+            existing ``path`` is refused). Anything else at ``path`` (a candidate database
+            included) is never replaced.
+
+        Raises
+        ------
+        pprender.Error
+            For another suffix (naming ``path`` and the supported ones), an existing
+            ``path`` without ``overwrite=True`` (or one that is not pprender's), a directory
+            that does not exist, data the netCDF engine cannot store exactly, or what
+            :meth:`to_xarray` refuses.
+        """
+        _io._suffix(path)
+        _io.write(self.to_xarray(), path, overwrite)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> "Measurement":
+        """Load a measurement :meth:`save` wrote (read into memory; the file is closed).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            A ``.zarr`` store or ``.nc`` file.
+
+        Returns
+        -------
+        Measurement
+            The measurement, equal to the one saved.
+
+        Raises
+        ------
+        pprender.Error
+            For another suffix, nothing at ``path``, a file that is not a pprender
+            Measurement (a RenderResult included), or one written in a newer format.
+        """
+        return cls.from_xarray(_io.read(path, "Measurement"))
+
+
+def _instrument_params(inst: Instrument) -> dict[str, Any]:
+    """Every field of ``inst`` as JSON values (``_instrument_from_params`` rebuilds it)."""
+    ch = inst.channels
+    assert isinstance(ch, Channels)
+    return {
+        "pulse_energy": float(inst.pulse_energy),
+        "target_range": float(inst.target_range),
+        "wavelength": float(inst.wavelength),
+        "divergence": float(inst.divergence),
+        "beam": str(inst.beam),
+        "aperture_diameter": float(inst.aperture_diameter),
+        "efficiency": float(inst.efficiency),
+        "transmission": float(inst.transmission),
+        "jitter": float(inst.jitter),
+        "background_rate": [float(x) for x in inst.background_rate],  # type: ignore[union-attr]
+        "channels": {
+            "names": list(ch.names),
+            "analyzers": [list(r) for r in ch.analyzers],
+            "generators": [list(r) for r in ch.generators],
+            "split": list(ch.split),
+            "pulse_share": list(ch.pulse_share),
+            "description": ch.description,
+        },
+        "n_pulses": int(inst.n_pulses),
+    }
+
+
+def _instrument_from_params(d: Any) -> Instrument:
+    kw = dict(d)
+    kw["channels"] = Channels(**kw["channels"])
+    return Instrument(**kw)
 
 
 def _warn_pile_up(lam: np.ndarray, instrument: Instrument) -> None:
