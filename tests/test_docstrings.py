@@ -47,6 +47,7 @@ MODULES = [
     "pprender.microfacet",
     "pprender.reference",
     "pprender.validation.seed",
+    "pprender.cli",
     "pprender",
 ]
 

@@ -345,8 +345,9 @@ impl PyRenderScene {
     /// `table_seconds`, the time spent building the materials' tables in this call (0 when
     /// cached), and `stage_seconds`, the wall-clock seconds of the render's stages
     /// ([`crate::render::Rendered::stage_seconds`] and the conversion to NumPy).
-    /// `progress(done, total)` is called as attitudes are done; an exception it raises (or
-    /// Ctrl-C) stops the render.
+    /// `progress(done, total)` is called as attitudes are done; an exception it raises, or
+    /// Ctrl-C (with or without a callback, on every backend), stops the render at the next
+    /// report: after the GPU chunk, CPU attitude or path-traced attitude in progress.
     #[pyo3(signature = (rotations, request, *, progress=None))]
     fn render<'py>(
         &self,
@@ -366,29 +367,63 @@ impl PyRenderScene {
         // The callback runs with the GIL (from worker threads on the CPU backends). An
         // exception it raises, or a pending KeyboardInterrupt, stops the render and is raised.
         let raised: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+        // Set once something is raised: the next report stops the render.
+        let cancelled = std::sync::atomic::AtomicBool::new(false);
+        let stop = |e: PyErr| {
+            raised.lock().expect("progress error").get_or_insert(e);
+            cancelled.store(true, std::sync::atomic::Ordering::Relaxed);
+        };
         let report = |done: usize, total: usize| -> bool {
+            if cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+                return false;
+            }
             Python::attach(|py| {
                 let r = py.check_signals().and_then(|()| match &progress {
                     Some(f) => f.call1(py, (done, total)).map(|_| ()),
                     None => Ok(()),
                 });
-                match r {
-                    Ok(()) => true,
-                    Err(e) => {
-                        raised.lock().expect("progress error").get_or_insert(e);
-                        false
-                    }
-                }
+                r.map_err(stop).is_ok()
             })
         };
+        // Python runs signal handlers on its main thread only (`check_signals` does nothing
+        // on others), and the CPU backends and the paths report from rayon's threads: the
+        // render runs on a thread of its own while this one checks for signals (Ctrl-C)
+        // every 50 ms, and the next report after one stops the render.
+        let caller = std::thread::current();
+        let finished = std::sync::atomic::AtomicBool::new(false);
         let out = py.detach(|| {
-            let request = request::Request {
-                sensor,
-                outputs,
-                backend,
-                table_options: opts,
-            };
-            request::render(&mesh, &self.tables, &request, &rots, Some(&report))
+            std::thread::scope(|s| {
+                let worker = std::thread::Builder::new()
+                    .name("pprender render".into())
+                    .stack_size(8 << 20)
+                    .spawn_scoped(s, || {
+                        let request = request::Request {
+                            sensor,
+                            outputs,
+                            backend,
+                            table_options: opts,
+                        };
+                        let out =
+                            request::render(&mesh, &self.tables, &request, &rots, Some(&report));
+                        finished.store(true, std::sync::atomic::Ordering::Release);
+                        caller.unpark();
+                        out
+                    })
+                    .map_err(|e| {
+                        crate::Error::Device(format!("cannot start the render thread: {e}"))
+                    })?;
+                let finished = || finished.load(std::sync::atomic::Ordering::Acquire);
+                // (or until the worker panics: `join` then passes the panic on)
+                while !finished() && !worker.is_finished() {
+                    std::thread::park_timeout(std::time::Duration::from_millis(50));
+                    if !finished() && !cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+                        Python::attach(|py| py.check_signals()).unwrap_or_else(stop);
+                    }
+                }
+                worker
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
         });
         if let Some(e) = raised.into_inner().expect("progress error") {
             return Err(e);

@@ -121,6 +121,34 @@ def _check_framing(scene: Scene, width: int) -> None:
         )
 
 
+class _Bar:
+    """A ``tqdm.auto`` bar fed by the renderer's ``progress(done, total)`` reports, which
+    may come from worker threads out of order (the bar only moves forward) and repeat the
+    final count (the thin-pixel pass after a device's last chunk)."""
+
+    def __init__(self, total: int) -> None:
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:
+            raise Error("invalid progress = True: the progress bar needs tqdm (pip install tqdm, or the "
+                        '"inverse" extra); pass a callable progress(done, total) instead') from None
+        self._tqdm = tqdm(total=total, unit="attitude", desc="render", dynamic_ncols=True)
+
+    def report(self, done: int, total: int) -> None:
+        if total != self._tqdm.total:
+            self._tqdm.total = total
+        if done > self._tqdm.n:
+            self._tqdm.update(done - self._tqdm.n)
+
+    def complete(self) -> None:
+        """The render returned: every attitude is done (a convex mesh's paths pass, which
+        traces nothing, reports nothing)."""
+        self.report(self._tqdm.total, self._tqdm.total)
+
+    def close(self) -> None:
+        self._tqdm.close()
+
+
 def render(
     scene: Scene,
     sensor: Lidar,
@@ -129,7 +157,7 @@ def render(
     *,
     device: str = "auto",
     settings: Settings | None = None,
-    progress: Callable[[int, int], object] | None = None,
+    progress: bool | Callable[[int, int], object] | None = None,
 ) -> RenderResult:
     """Render ``scene`` seen by ``sensor`` at every attitude, as one batch.
 
@@ -158,14 +186,19 @@ def render(
         rendered at several settings. Default: the sensor's. With ``bounces`` > 1 the light
         reflected between parts is added (traced on the CPU for every device) and
         ``RenderResult.by_bounce`` splits the outputs by the number of reflections.
-    progress : callable, optional
-        ``progress(done, total)``, called as attitudes are done (after each chunk on a
-        device, after each attitude on the CPU, then from worker threads; with ``bounces``
-        > 1 the paths are a second pass, counted in ``total = 2 N``), e.g. to update a
-        ``tqdm`` bar. An exception it raises stops the render and propagates; Ctrl-C
-        (KeyboardInterrupt) stops a device render between chunks too, and while the CPU
-        shades the pixels with parts thinner than a pixel after the device's last chunk
-        (the callback is then called again with ``done`` equal to the device's count).
+    progress : bool or callable, optional
+        ``True`` shows a progress bar on stderr (``tqdm.auto``: a widget in notebooks),
+        counting attitudes; ``None`` or ``False`` (default) shows nothing. A callable is
+        called as ``progress(done, total)`` as attitudes are done (after each chunk on a
+        device, after each attitude on the CPU, then from worker threads and possibly out
+        of order; with ``bounces`` > 1 the paths are a second pass, counted in
+        ``total = 2 N``), e.g. to update a bar of your own. An exception it raises stops
+        the render and propagates. Ctrl-C (KeyboardInterrupt), with or without
+        ``progress``, stops the render at the next such report on every backend (after the
+        device chunk, CPU attitude or path-traced attitude in progress; while the CPU shades
+        the pixels with parts thinner than a pixel after a device's last chunk, the callback
+        is called again with ``done`` equal to the device's count). The materials' tables,
+        built on first use before any attitude, are not interrupted.
 
     Returns
     -------
@@ -216,8 +249,9 @@ def render(
             )
     if device not in ("auto", "cpu", "lavapipe", "gpu"):
         raise Error(f'invalid device = {device!r}: one of "auto", "cpu" (lavapipe), "gpu"')
-    if progress is not None and not callable(progress):
-        raise Error(f"invalid progress of type {type(progress).__name__}: a callable progress(done, total)")
+    if progress is not None and not isinstance(progress, bool) and not callable(progress):
+        raise Error(f"invalid progress of type {type(progress).__name__}: True, False, None or a callable "
+                    "progress(done, total)")
     rot = _attitude_array(attitudes)
     if len(rot) == 0:
         raise Error("invalid attitudes: empty batch (N = 0)")
@@ -254,7 +288,15 @@ def render(
         path_seed=int(st.path_seed),
         **topts,
     )
-    d = scene._core.render(rot, request, progress=progress)
+    bar = _Bar(len(rot) * (2 if st.bounces > 1 else 1)) if progress is True else None
+    try:
+        report = bar.report if bar is not None else (progress if callable(progress) else None)
+        d = scene._core.render(rot, request, progress=report)
+        if bar is not None:
+            bar.complete()
+    finally:
+        if bar is not None:
+            bar.close()
     n = len(rot)
     mueller_out = pol is None
     tot = d["total"]
