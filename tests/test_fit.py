@@ -219,11 +219,22 @@ def test_vectorized_log_prob_renders_once_and_equals_single_calls(cube, monkeypa
     # material parameters: one render per distinct material and scale
     calls.clear()
     mat = fit.ForwardModel(model_mesh(), metal(), inst, res.bin_edges, ("rx", "alpha"), lidar=LIDAR,
-                           bounds={"rx": (-1, 1), "alpha": (0.1, 0.6)}, fixed={"ry": 0.3, "rz": 0.2})
+                           bounds={"rx": (-1, 1), "alpha": (0.1, 0.6)}, fixed={"ry": 0.3, "rz": 0.2},
+                           alpha_step=None)  # every alpha rendered exactly
     th = np.array([[0.40, 0.30], [0.41, 0.35], [0.39, 0.30], [0.42, 0.35], [0.40, 0.25], [0.40, 0.30]])
     batch = mat.log_prob(th, meas)
     assert sorted(calls) == [1, 2, 3]
     np.testing.assert_array_equal(batch, [mat.log_prob(t, meas) for t in th])
+    # interpolated in alpha (the default): one render per alpha node, the walkers of a node
+    # together; a batch equals single calls
+    calls.clear()
+    nodes = fit.ForwardModel(model_mesh(), metal(), inst, res.bin_edges, ("rx", "alpha"), lidar=LIDAR,
+                             bounds={"rx": (-1, 1), "alpha": (0.1, 0.6)}, fixed={"ry": 0.3, "rz": 0.2})
+    batch = nodes.log_prob(th, meas)
+    j = np.floor(np.log(th[:, 1]) / 0.05)
+    distinct = {int(k) for jj in j for k in (jj - 1, jj, jj + 1, jj + 2)}
+    assert len(calls) == len(distinct) and sum(calls) == 4 * len(th)
+    np.testing.assert_allclose(batch, [nodes.log_prob(t, meas) for t in th], rtol=1e-12)
     # the material is rebuilt: alpha = 0.3 here is the fixture's own material
     np.testing.assert_array_equal(mat.expected([0.4, 0.3]), att.expected([0.4, 0.2]))
 

@@ -339,6 +339,17 @@ class ForwardModel:
         (docs/fit-recovery.md measures both). ``"lidar"`` renders with the ``lidar``'s own
         settings; a :class:`pprender.Settings` is used as given. Settings with sampled
         coverage and a free attitude or scale warn (:class:`FitWarning`).
+    alpha_step : float or None, optional
+        With ``alpha`` free: the expected counts at any ``alpha`` are the Catmull-Rom
+        interpolation (C1, exact for quadratics in ``ln alpha``) of those rendered with
+        materials built at the nodes ``alpha = exp(j * alpha_step)``, the four about it.
+        Materials are then built once per node (about a second each for a metal with the
+        multiple term) instead of once per new ``alpha`` value, so a roughness fit costs
+        about four renders per evaluation instead of a material build
+        (docs/fit-recovery.md measures both, and the interpolation's error: at 2e4 counts
+        log L within 0.01 of the exact one about the optimum, expected counts within 5e-4
+        of the peak bin). In (0, 1]; default 0.05 (nodes 5.1% apart). None renders every
+        ``alpha`` exactly.
     """
 
     def __init__(
@@ -360,6 +371,7 @@ class ForwardModel:
         cache_size: int = 64,
         device: str = "auto",
         settings: Any = None,
+        alpha_step: float | None = 0.05,
     ) -> None:
         if not isinstance(instrument, Instrument):
             raise Error(f"invalid instrument of type {type(instrument).__name__}: expected Instrument")
@@ -441,6 +453,9 @@ class ForwardModel:
         self.lidar = replace(lidar, polarization=tuple(ch.transmit)) if ch.single_generator else lidar  # type: ignore[union-attr]
         self.device = device
         self.settings = _fit_settings(lidar, settings, device, free)
+        if alpha_step is not None:
+            alpha_step = _check_number("alpha_step", alpha_step, 0.0, 1.0, True, False, "step in ln(alpha)")
+        self.alpha_step: float | None = alpha_step if "alpha" in free else None
         # geometry and materials (validated once by building the reference scene)
         base = _lidar.Scene(mesh, materials, smooth=smooth, face_material=face_material, wavelength=instrument.wavelength)
         verts, faces, meta, vn = _lidar._mesh_arrays(mesh)
@@ -576,7 +591,43 @@ class ForwardModel:
 
     def _expected_full(self, full: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Expected counts (n, B, C) and validity (n,) for full parameter rows; invalid
-        rows (no material can be built, non-finite results) are NaN."""
+        rows (no material can be built, non-finite results) are NaN. With ``alpha_step``,
+        rows with a free ``alpha`` are the Catmull-Rom interpolation of the renders at the
+        four alpha nodes about it (class docstring)."""
+        n = len(full)
+        if self.alpha_step is None:
+            return self._rendered(full)
+        ia = self._index["alpha"]
+        u = np.log(np.where(full[:, ia] > 0, full[:, ia], np.nan)) / self.alpha_step
+        u = np.where(np.abs(u - np.round(u)) < 1e-9, np.round(u), u)  # on a node: one render
+        j = np.floor(u)
+        t = u - j
+        w = np.stack([(-t**3 + 2 * t**2 - t) / 2, (3 * t**3 - 5 * t**2 + 2) / 2,
+                      (-3 * t**3 + 4 * t**2 + t) / 2, (t**3 - t**2) / 2], axis=1)  # (n, 4)
+        rows, weights, src = [], [], []
+        for m in range(4):
+            node = full.copy()
+            node[:, ia] = np.exp((j + m - 1) * self.alpha_step)
+            keep = np.isfinite(u) & (w[:, m] != 0.0)
+            rows.append(node[keep])
+            weights.append(w[keep, m])
+            src.append(np.flatnonzero(keep))
+        lam_all, ok_all = self._rendered(np.concatenate(rows))
+        out = np.zeros((n, len(self.bin_edges) - 1, len(self.channel_names)))
+        ok = np.isfinite(u)
+        at = 0
+        for m in range(4):
+            k = len(src[m])
+            out[src[m]] += weights[m][:, None, None] * np.where(ok_all[at:at + k, None, None], lam_all[at:at + k], 0.0)
+            ok[src[m][~ok_all[at:at + k]]] = False
+            at += k
+        # the interpolant may dip below zero between nodes where a bin is ~0: counts >= 0
+        out = np.maximum(out, 0.0)
+        out[~ok] = np.nan
+        return out, ok
+
+    def _rendered(self, full: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Expected counts rendered at exactly these parameter rows."""
         n = len(full)
         out = np.full((n, len(self.bin_edges) - 1, len(self.channel_names)), np.nan)
         ok = np.zeros(n, dtype=bool)
@@ -1357,7 +1408,8 @@ def maximum_likelihood(
        batch), at ``x0`` (if given), at every point of ``starts`` (e.g. a classifier's best
        candidates through :func:`attitude_starts`) and at ``n_global`` points spread over
        the bounds (an SO(3) grid when ``rx, ry, rz`` are all free, scrambled Sobol' points
-       otherwise, seeded with ``seed``).
+       otherwise, seeded with ``seed``; with the model's ``alpha_step``, their ``alpha`` on
+       every 8th node, where no interpolation is needed).
     2. **Local stage.** :func:`fit_nlopt`'s optimizer from the ``n_local`` best of them that
        lie apart (more than the global points' spacing), with an initial step of half that
        spacing, plus ``x0`` and every ``starts`` point; the best optimum wins.
@@ -1447,6 +1499,15 @@ def maximum_likelihood(
     n_eval = 0
     if n_glob > 0:
         pts = _global_points(model, n_glob, seed)
+        if model.alpha_step is not None:
+            # the global stage's alphas on every 8th node: one render and few materials each
+            ia = model.names.index("alpha")
+            coarse = 8 * model.alpha_step
+            lo, hi = model.lower[ia], model.upper[ia]
+            k = np.round(np.log(pts[:, ia]) / coarse)
+            k = np.clip(k, np.ceil(np.log(lo) / coarse - 1e-9), np.floor(np.log(hi) / coarse + 1e-9))
+            snapped = np.exp(k * coarse)
+            pts[:, ia] = np.where((snapped >= lo) & (snapped <= hi), snapped, pts[:, ia])
         ll = np.concatenate([model.log_likelihood(pts[i:i + 256], measurement) for i in range(0, len(pts), 256)])
         n_eval += len(pts)
         order = np.argsort(-ll)
