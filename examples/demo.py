@@ -11,7 +11,9 @@ their paths:
   (up to 3 bounces: a panel against the bus is a corner) is included.
 * ``cubesat_profiles.png``: the range-resolved returns of the same attitudes: M00 and the
   co- and cross-polarized returns for horizontal linear and for circular transmission, and
-  the part of M00 that reached the receiver after 2 or 3 reflections.
+  the part of M00 that reached the receiver after 2 or 3 reflections. Each panel has its
+  own y scale (the 0 deg glint is 100x the others).
+* ``cubesat_range.png``: the range maps of the same attitudes (:func:`pprender.plot.range_image`).
 * For each named material: the 16 Mueller elements (normalized by M00) and M00 against
   the scattering geometry, in monostatic backscatter and in the plane of incidence at 30
   degrees incidence, plus depolarization and diattenuation of the backscattered return.
@@ -21,12 +23,13 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Any
 from pathlib import Path
 
 import numpy as np
 
 import pprender
-from pprender import materials, polarimetry
+from pprender import materials, plot, polarimetry
 
 NAMES = ("aluminium", "gold", "fused_silica", "kapton", "white_paint")
 
@@ -123,12 +126,59 @@ def cubesat_demo(out: Path) -> list[Path]:
         if len(nz):
             ax.set_xlim(t_ns[max(nz[0] - 5, 0)], t_ns[min(nz[-1] + 5, len(t_ns) - 1)])
     axes[0].set_ylabel("cross-section per bin (m^2)")
-    axes[-1].legend(fontsize=7)
+    # one legend beside the panels, covering none of them; each panel keeps its own y scale
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper", fontsize=8)
     fig.suptitle("Range-resolved returns (bin width %.1f mm of range)" % (1e3 * (res.bin_edges[1] - res.bin_edges[0])))
     p2 = out / "cubesat_profiles.png"
     fig.savefig(p2, dpi=80)
     plt.close(fig)
-    return [p1, p2]
+
+    # range maps: one image per attitude, each with its own colorbar (m)
+    fig, axes = plt.subplots(1, len(q), figsize=(4.2 * len(q), 3.8), layout="constrained")
+    for k in range(len(q)):
+        plot.range_image(res, index=k, ax=axes[k])
+        axes[k].set_title(f"{np.degrees(angles[k]):.0f} deg: range")
+    fig.suptitle("Range of what each pixel sees (m, positive away from the sensor; blank: nothing seen)")
+    p3 = out / "cubesat_range.png"
+    fig.savefig(p3, dpi=80)
+    plt.close(fig)
+    return [p1, p2, p3]
+
+
+def mueller_figure(name: str, mat: pprender.Material, incidence_deg: float = 30.0) -> Any:
+    """The 16 Mueller elements of ``mat`` (M00 and Mij / M00) in the plane of incidence against
+    the outgoing angle, at ``incidence_deg`` incidence; returns the figure."""
+    import matplotlib.pyplot as plt
+
+    theta_o = np.radians(np.linspace(-89.0, 89.0, 357))
+    wi = _sph(np.array(np.radians(incidence_deg)), phi=np.pi)  # transmitter on the -x side
+    wo = _sph(np.abs(theta_o))
+    wo[theta_o < 0, 0] *= -1
+    M = pprender.brdf(mat, np.broadcast_to(wi, wo.shape), wo)
+    fig, axes = plt.subplots(4, 4, figsize=(12, 10), sharex=True, layout="constrained")
+    for i in range(4):
+        for j in range(4):
+            ax = axes[i, j]
+            if i == j == 0:
+                ax.semilogy(np.degrees(theta_o), M[:, 0, 0])
+                ax.set_title("M00 (1/sr)")
+            else:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    ratio = np.where(M[:, 0, 0] > 0, M[:, i, j] / M[:, 0, 0], np.nan)
+                ax.plot(np.degrees(theta_o), ratio)
+                ax.set_ylim(-1.05, 1.05)
+                ax.set_title(f"M{i}{j}/M00")
+            if i == 3:
+                ax.set_xlabel("theta_o (deg)")
+    # a short title (the material's repr is longer than the figure is wide)
+    eta = complex(mat.eta)
+    what = f"{mat.distribution}, alpha = {mat.alpha:g}, eta = {eta.real:.4g} + {eta.imag:.4g}i"
+    what += f", terms {' + '.join(mat.terms)}"
+    if "diffuse" in mat.terms:
+        what += f" (albedo {mat.diffuse_albedo:g})"
+    wl = f" at {mat.wavelength * 1e9:.0f} nm" if mat.wavelength else ""
+    fig.suptitle(f"{name}{wl}: {what}\nsp frame, {incidence_deg:g} deg incidence, plane of incidence")
+    return fig
 
 
 def main(outdir: str = "out") -> list[Path]:
@@ -166,28 +216,8 @@ def main(outdir: str = "out") -> list[Path]:
     written.append(p)
 
     # 2) Full normalized Mueller matrix in the plane of incidence, incidence 30 degrees.
-    theta_o = np.radians(np.linspace(-89.0, 89.0, 357))
-    wi = _sph(np.array(np.radians(30.0)), phi=np.pi)  # transmitter on the -x side
-    wo = _sph(np.abs(theta_o))
-    wo[theta_o < 0, 0] *= -1
     for name, mat in mats.items():
-        M = pprender.brdf(mat, np.broadcast_to(wi, wo.shape), wo)
-        fig, axes = plt.subplots(4, 4, figsize=(12, 10), sharex=True, constrained_layout=True)
-        for i in range(4):
-            for j in range(4):
-                ax = axes[i, j]
-                if i == j == 0:
-                    ax.semilogy(np.degrees(theta_o), M[:, 0, 0])
-                    ax.set_title("M00 (1/sr)")
-                else:
-                    with np.errstate(invalid="ignore", divide="ignore"):
-                        ratio = np.where(M[:, 0, 0] > 0, M[:, i, j] / M[:, 0, 0], np.nan)
-                    ax.plot(np.degrees(theta_o), ratio)
-                    ax.set_ylim(-1.05, 1.05)
-                    ax.set_title(f"M{i}{j}/M00")
-                if i == 3:
-                    ax.set_xlabel("theta_o (deg)")
-        fig.suptitle(f"{name} at 1064 nm: {mat!r}\nsp frame, incidence 30 deg, plane of incidence")
+        fig = mueller_figure(name, mat)
         p = out / f"mueller_{name}.png"
         fig.savefig(p, dpi=90)
         plt.close(fig)

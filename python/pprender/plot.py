@@ -11,6 +11,9 @@ Conventions (written once here):
 * Stokes images and profiles from a Mueller render are for the transmitted state
   ``input_state`` (default H, ``(1, 1, 0, 0)``, in the transmit basis): ``S = M s_in``.
 * Ranges in metres (positive away from the sensor), angles in degrees unless stated.
+* Range profiles (:func:`profile`) zoom by default to where the signal is: a render's bins
+  cover the target's bounding sphere and the pulse, and a compact return fills a small
+  part of them.
 """
 
 from __future__ import annotations
@@ -30,10 +33,19 @@ __all__ = [
     "corner",
     "polarization_images",
     "profile",
+    "range_image",
     "stokes_images",
 ]
 
 _H = (1.0, 1.0, 0.0, 0.0)
+
+# range_window="signal": bins whose signal exceeds this fraction of the peak are "lit".
+_SIGNAL_FRACTION = 1e-3
+# range_window="signal": the lit span is padded on each side by this many bins (one pulse
+# FWHM at the Lidar default bin width, range_fwhm / 4), or by _SIGNAL_PAD_SPAN
+# of the span where that is more.
+_SIGNAL_PAD_BINS = 4
+_SIGNAL_PAD_SPAN = 0.1
 
 
 def _plt() -> Any:
@@ -49,6 +61,11 @@ def _state(input_state: Any) -> np.ndarray:
     return s
 
 
+def _check_index(index: Any, n: int) -> None:
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -n <= index < n:
+        raise Error(f"invalid index = {index!r}: an integer in [-{n}, {n}) (negative counts from the end)")
+
+
 def _stokes_image(result: Any, index: int, input_state: Any) -> tuple[np.ndarray, np.ndarray | None, float]:
     """(H, W, 4) Stokes image, (H, W, 4, 4) Mueller image or None, extent."""
     if not isinstance(result, RenderResult):
@@ -61,8 +78,7 @@ def _stokes_image(result: Any, index: int, input_state: Any) -> tuple[np.ndarray
         m = None
     else:
         raise Error('invalid result: no image; render with outputs=("mueller",) or ("stokes",)')
-    if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -n <= index < n:
-        raise Error(f"invalid index = {index!r}: an integer in [-{n}, {n}) (negative counts from the end)")
+    _check_index(index, n)
     if m is not None:
         mi = m[index]
         s = mi @ _state(input_state)
@@ -72,6 +88,7 @@ def _stokes_image(result: Any, index: int, input_state: Any) -> tuple[np.ndarray
 
 def _image(fig: Any, ax: Any, data: np.ndarray, extent: float, title: str, cmap: str, vmin: Any = None,
            vmax: Any = None, label: str = "", log: bool = False) -> None:
+    """imshow ``data`` (NaN or masked pixels blank) with the image conventions, and a colorbar."""
     norm = None
     if log:
         from matplotlib.colors import LogNorm
@@ -193,15 +210,50 @@ def polarization_images(result: RenderResult, index: int = 0, input_state: Seque
     return fig
 
 
+def _range_window(range_window: Any) -> str | tuple[float, float]:
+    """The checked ``range_window`` option: ``"signal"``, ``"all"`` or ``(lo, hi)`` metres."""
+    if isinstance(range_window, str):
+        if range_window in ("signal", "all"):
+            return range_window
+    elif isinstance(range_window, (tuple, list, np.ndarray)) and len(range_window) == 2:
+        try:
+            lo, hi = (float(v) for v in range_window)
+        except (TypeError, ValueError):
+            pass
+        else:
+            if math.isfinite(lo) and math.isfinite(hi) and lo < hi:
+                return lo, hi
+    raise Error(f"invalid range_window = {range_window!r}: \"signal\" (zoom to the signal), \"all\" (the "
+                "whole window) or (lo, hi), finite metres with lo < hi")
+
+
+def _signal_limits(strength: np.ndarray, edges: np.ndarray) -> tuple[float, float]:
+    """Range limits (m) around the bins where ``strength`` (B,) exceeds a small fraction of its
+    peak (:func:`profile`'s ``range_window="signal"``); the whole window if there is none."""
+    peak = float(np.max(strength, initial=0.0))
+    lit = np.flatnonzero(strength > _SIGNAL_FRACTION * peak) if peak > 0 else np.empty(0, dtype=np.int64)
+    if lit.size == 0:
+        return float(edges[0]), float(edges[-1])
+    lo, hi = float(edges[lit[0]]), float(edges[lit[-1] + 1])
+    pad = max(_SIGNAL_PAD_BINS * float(np.median(np.diff(edges))), _SIGNAL_PAD_SPAN * (hi - lo))
+    return max(lo - pad, float(edges[0])), min(hi + pad, float(edges[-1]))
+
+
 def profile(data: Any, *, bin_edges: Any = None, index: int = 0, input_state: Sequence[float] = _H,
-            instrument: Any = None, ax: Any = None, log: bool = False) -> Any:
+            instrument: Any = None, ax: Any = None, log: bool = False,
+            range_window: str | tuple[float, float] = "signal") -> Any:
     """Range profile with its polarization channels, on one axes.
+
+    By default the range axis is zoomed to where the signal is: a render's bins cover the
+    target's bounding sphere and the pulse, and a compact return fills a small part of them.
 
     Parameters
     ----------
     data : Measurement, RenderResult or array_like
-        * a :class:`pprender.instrument.Measurement`: recorded counts per channel (steps) and
-          their expectation (lines) against range;
+        * a :class:`pprender.instrument.Measurement`: recorded counts per channel (thin
+          steps) and, drawn on top of them, their expectation (``signal + background``;
+          thick lines through the bin centres, in the same colour with a white outline, one
+          line style per channel);
         * a :class:`RenderResult` with a profile, or an array ``(..., B, 4, 4)`` Mueller /
           ``(..., B, 4)`` Stokes with ``bin_edges``: the Stokes components ``I, Q, U, V``
           (m^2 per bin; from a Mueller profile for ``input_state``), or, with an
@@ -218,6 +270,17 @@ def profile(data: Any, *, bin_edges: Any = None, index: int = 0, input_state: Se
         Draw into this axes (and its figure).
     log : bool, optional
         Log y axis. Default False.
+    range_window : {"signal", "all"} or tuple of float, optional
+        The range axis limits:
+
+        * ``"signal"`` (default): the bins where the signal exceeds 1e-3 of its peak (the
+          largest ``|value|`` of the lines drawn; for a measurement its expected signal
+          counts, background excluded), padded on each side by 4 bins (one pulse FWHM at
+          :class:`pprender.Lidar`'s default bin width, ``range_fwhm / 4``) or a tenth of
+          that span, whichever is more, within the bins; the whole window if there is no
+          signal;
+        * ``"all"``: the whole window, ``bin_edges[0]`` to ``bin_edges[-1]``;
+        * ``(lo, hi)``: these limits (m, finite, ``lo < hi``).
 
     Returns
     -------
@@ -227,51 +290,115 @@ def profile(data: Any, *, bin_edges: Any = None, index: int = 0, input_state: Se
     Raises
     ------
     pprender.Error
-        For invalid data, ``index``, ``instrument`` or ``input_state``.
+        For invalid data, ``index``, ``instrument``, ``input_state`` or ``range_window``.
     """
+    from matplotlib import patheffects
+
     from .inverse.instrument import Instrument, Measurement, _channel_cross_sections, _profile_and_edges
 
-    plt = _plt()
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(8.0, 4.5))
-    else:
-        fig = ax.figure
+    window = _range_window(range_window)
 
     def pick(a: np.ndarray, core: int) -> np.ndarray:
         if a.ndim == core:
             return a
         flat = a.reshape((-1,) + a.shape[-core:])
-        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -len(flat) <= index < len(flat):
-            raise Error(f"invalid index = {index!r}: an integer in [-{len(flat)}, {len(flat)}) (negative counts "
-                        "from the end)")
+        _check_index(index, len(flat))
         return flat[index]
 
+    # what to draw: (B, C) values and names, checked before a figure is made
     if isinstance(data, Measurement):
         edges = data.bin_edges
         counts = pick(data.counts, 2)
         expected = pick(data.expected, 2)
-        for c, name in enumerate(data.channel_names):
-            line = ax.stairs(counts[:, c], edges, label=f"{name} counts")
-            ax.stairs(expected[:, c], edges, color=line.get_edgecolor(), linestyle="--", alpha=0.8,
-                      label=f"{name} expected")
-        ax.set_ylabel("counts per bin")
+        strength = pick(data.signal, 2).max(axis=1)
+        names = list(data.channel_names)
     else:
         p, edges, mueller = _profile_and_edges(data, bin_edges)
         if instrument is not None:
             if not isinstance(instrument, Instrument):
                 raise Error(f"invalid instrument of type {type(instrument).__name__}: expected Instrument")
-            sig = pick(_channel_cross_sections(p, mueller, instrument.channels), 2)  # type: ignore[arg-type]
-            for c, name in enumerate(instrument.channel_names):
-                ax.stairs(sig[:, c], edges, label=name)
+            values = pick(_channel_cross_sections(p, mueller, instrument.channels), 2)  # type: ignore[arg-type]
+            names = list(instrument.channel_names)
         else:
-            s = pick(p, 3) @ _state(input_state) if mueller else pick(p, 2)
-            for k, name in enumerate("IQUV"):
-                ax.stairs(s[:, k], edges, label=name)
+            values = pick(p, 3) @ _state(input_state) if mueller else pick(p, 2)
+            names = list("IQUV")
+        strength = np.abs(values).max(axis=1)
+
+    plt = _plt()
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(8.0, 4.5), layout="constrained")
+    else:
+        fig = ax.figure
+    if isinstance(data, Measurement):
+        halo = [patheffects.withStroke(linewidth=3.5, foreground="white")]
+        centres = 0.5 * (edges[1:] + edges[:-1])
+        for c, name in enumerate(names):
+            colour = f"C{c}"
+            ax.stairs(counts[:, c], edges, color=colour, linewidth=0.8, alpha=0.55, zorder=2,
+                      label=f"{name} counts")
+            # a line style per channel, so nearly equal expectations stay told apart
+            ax.plot(centres, expected[:, c], color=colour, linestyle=("-", "--", "-.", ":")[c % 4], linewidth=2.0,
+                    zorder=3, path_effects=halo, label=f"{name} expected")
+        ax.set_ylabel("counts per bin")
+    else:
+        for k, name in enumerate(names):
+            ax.stairs(values[:, k], edges, label=name)
         ax.set_ylabel("cross-section per bin (m$^2$)")
     ax.set_xlabel("range (m)")
+    if window == "signal":
+        ax.set_xlim(*_signal_limits(strength, edges))
+    elif window == "all":
+        ax.set_xlim(float(edges[0]), float(edges[-1]))
+    else:
+        ax.set_xlim(*window)
     if log:
         ax.set_yscale("symlog" if not isinstance(data, Measurement) else "log")
     ax.legend(fontsize="small", ncol=2)
+    return fig
+
+
+def range_image(result: RenderResult, index: int = 0, *, ax: Any = None, cmap: str = "viridis",
+                figsize: tuple[float, float] = (5.5, 4.5)) -> Any:
+    """The range map of one attitude of a render: the mean range of what each pixel sees.
+
+    One image axes (the image conventions of the module docstring) and a colorbar in
+    metres; pixels where nothing is seen (NaN in ``result.range``) are masked, blank.
+
+    Parameters
+    ----------
+    result : RenderResult
+        A render with ``"range"`` output.
+    index : int, optional
+        The attitude. Default 0.
+    ax : matplotlib.axes.Axes, optional
+        Draw into this axes (and its figure).
+    cmap : str, optional
+        Colour map. Default ``"viridis"`` (dark is near).
+    figsize : tuple of float, optional
+        Figure size (inches) of a new figure. Default (5.5, 4.5).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+
+    Raises
+    ------
+    pprender.Error
+        For a result without a range map or an ``index`` out of range.
+    """
+    if not isinstance(result, RenderResult):
+        raise Error(f"invalid result of type {type(result).__name__}: expected a pprender.RenderResult")
+    if result.range is None:
+        raise Error('invalid result: no range map; render with outputs=("range",)')
+    _check_index(index, len(result.range))
+    plt = _plt()
+    if ax is None:
+        fig, ax = plt.subplots(figsize=figsize, layout="constrained")
+    else:
+        fig = ax.figure
+    _image(fig, ax, np.ma.masked_invalid(result.range[index]), result.extent, "range (away from the sensor)", cmap,
+           label="range (m)")
     return fig
 
 
