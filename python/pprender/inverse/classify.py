@@ -31,27 +31,69 @@ Conventions (every function and class in this module):
   (zero beyond the ends). ``o > 0`` means the measurement lies ``o`` bins farther in range
   than the candidate. Ties go to the smallest ``|o|`` (then the negative one).
 * Weights ``W`` (``F' x F``), learned from the candidates with labels of a ``target``
-  (``"shape"``, ``"material"`` or ``"attitude"``); candidates are first scaled to unit
-  norm (the score ignores intensity), and covariances are of these unit vectors:
+  (``"shape"``, ``"material"`` or ``"attitude"``) and from the measurements' count level;
+  candidates are first scaled to unit norm (the score ignores intensity), and covariances
+  are of these unit vectors:
 
-  - ``None``: ``W = I``, the plain cosine similarity.
-  - ``"whiten"``: ``W = (S_w + lambda I)^(-1/2)`` with ``S_w`` the pooled within-class
+  - ``None``: ``W = I``, the plain cosine similarity (the default). On held-out
+    measurements (``docs/classifier-weights.md``) ``"whiten"`` given the measurements'
+    ``counts`` was never worse than it by more than one standard error and at best 0.01
+    better; where the count level is unknown, keep ``None``.
+  - ``"whiten"``: ``W = (S_r + (tau + lambda) I)^(-1/2)``, the inverse square root of the
+    covariance of what a nearest-candidate search leaves unexplained:
+
+    * ``S_r``, the spread of a candidate about its nearest neighbour of the same target
+      class: half the mean ``R`` of ``r r^T`` over the residuals ``r = y_k - y_j`` of each
+      candidate ``k`` to the candidate ``j != k`` of its class with the highest cosine
+      (from at most 2048 candidates ``k``, evenly spaced in index; classes of one candidate
+      have none), shrunk toward ``(trace(R) / F) I`` with Ledoit and Wolf's weight (2004,
+      J. Multivar. Anal. 88, 365: estimated from the residuals themselves, large when they
+      are few against ``F``). Variation between classes, and variation along the candidate
+      grid that the search resolves (attitude), is not in it;
+    * ``tau``, the Poisson noise of a measurement with ``counts`` expected signal and
+      ``background`` expected background counts (:class:`Classifier`), per unit-norm
+      feature: ``tau = 1 / counts + (background / F) * mean_k (sum_f |y_kf|)^2 / counts^2``.
+      A unit-norm profile ``u`` measured with ``N`` signal counts has variance ``u_f / a``
+      in feature ``f`` (``a = N / sum_f u_f`` the counts per unit norm), ``1 / N`` on average
+      over its effective support of ``(sum_f u_f)^2`` features, plus the background's
+      ``b_f / a^2``; ``tau`` takes that as the same in every direction. It assumes the
+      channels are counted intensities (co/cross, analyzer channels);
+    * ``lambda = regularization * trace(S_r) / F``, a small ridge (``trace(S_r)`` replaced by
+      ``F tau``, or by ``F``, where it is 0).
+
+    Directions in which a measurement varies more than the noise, beyond the nearest
+    candidate (nuisance: for ``target="material"``, shape and attitude detail finer than
+    the grid), are damped; no direction is weighted more than ``1 / sqrt(tau)``, so with few
+    counts ``W`` tends to a multiple of ``I`` (plain cosine).
+
+    Changed in issue 25: ``"whiten"`` was ``(S_w + lambda I)^(-1/2)`` (``S_w`` as for
+    ``"lda"`` below) with no noise. ``S_w`` holds the attitude variation of a class, which
+    the search over the grid resolves, and it is nearly singular (rank 192 of 528 features
+    with 256 candidates); the small ridge left most directions, where the candidates of a
+    class do not vary but measurements and their noise do, weighted most. At 3000 counts
+    the margin of the right material over the best wrong one fell from 7.0 to 0.75 noise
+    standard deviations, and on held-out measurements it lost up to 0.45 of the accuracy
+    to ``None`` (``docs/classifier-weights.md``).
+  - ``"lda"``: Fisher discriminant weighting, for classes that are clusters about their
+    means. ``W0 = (S_w + (tau + lambda) I)^(-1/2)`` with ``S_w`` the pooled within-class
     covariance (scatter of candidates about the mean of their target class, divided by
-    ``K - n_classes``) and ``lambda = regularization * trace(S_w) / F``. Directions in
-    which candidates of one class vary a lot (nuisance: for ``target="material"`` the
-    variation with shape and attitude) are damped; stable directions are emphasized.
-  - ``"lda"``: Fisher discriminant weighting. In the whitened space, the between-class
-    covariance ``S_b`` (class means about the overall mean, weighted by class size)
-    becomes ``W0 S_b W0 = V diag(mu) V^T`` with ``mu`` the Fisher ratios (between- over
-    within-class variance) of the directions ``V``; ``W = diag(sqrt(1 + mu)) V^T W0``
-    keeps every direction but stretches the discriminant ones. With ``n_components``
-    only the top ``n_components`` directions are kept (classical LDA, at most
-    ``n_classes - 1`` informative ones; with few of them many candidates tie).
+    ``K - n_classes``), ``tau`` as above and ``lambda = regularization * trace(S_w) / F``.
+    In the space of ``W0``, the between-class covariance ``S_b`` (class means about the
+    overall mean, weighted by class size) becomes ``W0 S_b W0 = V diag(mu) V^T`` with
+    ``mu`` the Fisher ratios (between- over within-class variance) of the directions
+    ``V``; ``W = diag(sqrt(1 + mu)) V^T W0`` keeps every direction but stretches the
+    discriminant ones. With ``n_components`` only the top ``n_components`` directions are
+    kept (classical LDA, at most ``n_classes - 1`` informative ones; with few of them many
+    candidates tie). On a candidate grid (attitudes) ``S_w`` holds variation the search
+    resolves, as the old ``"whiten"`` did, and with few counts ``"lda"`` does worse than
+    ``None`` (``docs/classifier-weights.md``); issue 25 added ``tau`` to it.
   - an array: ``(C,)`` per-channel or ``(B, C)`` per-feature weights (a diagonal ``W``),
     or a matrix ``(F', F)``.
 
-  Learned weights need ``F <= 4096`` (an ``F x F`` eigen-decomposition); use a
-  projection with fewer channels otherwise.
+  Learned weights without ``counts`` assume noise-free measurements (``tau = 0``) and warn
+  (:class:`NoiseFreeWeightsWarning`): give ``counts`` (``math.inf`` for truly noise-free
+  data). They need ``F <= 4096`` (an ``F x F`` eigen-decomposition); use a projection
+  with fewer channels otherwise.
 * Numbers are numbers: text, None or complex values in candidates, measurements,
   weights or numeric parameters raise :class:`pprender.Error` naming the parameter.
 """
@@ -72,6 +114,7 @@ __all__ = [
     "Classifier",
     "Matches",
     "NoMatchWarning",
+    "NoiseFreeWeightsWarning",
     "Projection",
     "co_cross_projection",
     "mueller_projection",
@@ -82,12 +125,23 @@ _TARGETS = ("shape", "material", "attitude")
 _MAX_LEARNED_FEATURES = 4096
 #: Best scores at or below this are no match (module docstring).
 _NO_MATCH_SCORE = 1e-9
+#: Most candidates whose nearest-neighbour residuals estimate ``S_r`` (module docstring).
+_MAX_RESIDUALS = 2048
 
 
 class NoMatchWarning(UserWarning):
     """:meth:`Classifier.top_k`: some measurement matches no candidate (best score ``<= 1e-9``).
 
     See :attr:`Matches.matched`.
+    """
+
+
+class NoiseFreeWeightsWarning(UserWarning):
+    """:class:`Classifier`: learned weights (``"whiten"``, ``"lda"``) built without ``counts``.
+
+    They then assume noise-free measurements and, at a finite count level, can do far
+    worse than no weights (module docstring, ``docs/classifier-weights.md``). Pass the
+    measurements' expected signal counts as ``counts`` (``math.inf`` for noise-free data).
     """
 
 
@@ -274,22 +328,42 @@ class Classifier:
         :func:`mueller_projection` (Mueller) or the stored Stokes channels; for arrays,
         none.
     weights : None, "whiten", "lda" or array_like, optional
-        The weight matrix ``W`` (module docstring). Default None.
+        The weight matrix ``W`` (module docstring). Default None, the plain cosine. Learned
+        weights need ``counts`` (``docs/classifier-weights.md``).
     target : {"shape", "material", "attitude"}, optional
         The label whose classes define learned weights. Default ``"material"``.
     max_shift : int, optional
         Largest range offset searched, in bins (>= 0, below ``B``). Default 0.
     regularization : float, optional
-        Relative ridge ``lambda / (trace(S_w) / F)`` for learned weights, > 0. Default 1e-2.
+        Relative ridge ``lambda / (trace(S_r) / F)`` for learned weights, > 0 (module
+        docstring). Default 1e-2.
     n_components : int, optional
         For ``"lda"``: keep only this many discriminant directions.
+    counts : float, optional
+        For learned weights: the expected signal counts of a measurement (summed over bins
+        and channels), > 0, or ``math.inf`` for noise-free measurements; sets the noise
+        variance ``tau`` (module docstring). With measurements at several count levels give
+        the lowest: weights made for too many counts amplify noise, weights made for too few
+        only tend to the plain cosine. Without it, learned weights assume noise-free
+        measurements and warn (:class:`NoiseFreeWeightsWarning`).
+    background : float, optional
+        For learned weights with ``counts``: the expected background counts of a
+        measurement (summed over bins and channels, taken as spread evenly over the ``F``
+        features; the expectation is subtracted before scoring, its noise stays), >= 0.
+        Default 0.
 
     Raises
     ------
     pprender.Error
         For an incomplete or empty database, candidates that are all zero or vanish under
         the weights (module docstring), labels with a database, ``n_components`` without
-        ``weights="lda"``, or other invalid arguments.
+        ``weights="lda"``, ``counts`` or ``background`` without learned weights, or other
+        invalid arguments.
+
+    Warns
+    -----
+    NoiseFreeWeightsWarning
+        For learned weights without ``counts``.
     """
 
     def __init__(
@@ -303,6 +377,8 @@ class Classifier:
         max_shift: int = 0,
         regularization: float = 1e-2,
         n_components: int | None = None,
+        counts: float | None = None,
+        background: float = 0.0,
     ) -> None:
         self.projection = projection
         self.labels: dict[str, np.ndarray] = {}
@@ -336,8 +412,10 @@ class Classifier:
             raise Error(
                 f"invalid n_components = {n_components!r}: it applies only to weights=\"lda\" (weights = {weights!r})"
             )
+        learned = isinstance(weights, str) and weights in ("whiten", "lda")
+        noise = _noise_level(counts, background, learned, weights)
         self.target = target
-        self.weights = self._weights(weights, target, float(regularization), n_components)
+        self.weights = self._weights(weights, target, float(regularization), n_components, noise)
         y = self._apply(feats.reshape(K, B * C))
         norm = np.linalg.norm(y, axis=1, keepdims=True)
         if not np.any(norm > 0):
@@ -404,7 +482,9 @@ class Classifier:
         _, inv = np.unique(np.asarray(self.labels[key]).astype(str), return_inverse=True)
         return inv.ravel()
 
-    def _weights(self, weights: Any, target: str, reg: float, n_components: int | None) -> np.ndarray | None:
+    def _weights(
+        self, weights: Any, target: str, reg: float, n_components: int | None, noise: tuple[float, float] | None
+    ) -> np.ndarray | None:
         K, B, C = self.features.shape
         F = B * C
         if weights is None:
@@ -417,29 +497,42 @@ class Classifier:
                     f"invalid weights = {weights!r}: {F} features (B = {B} bins x C = {C} channels) is "
                     f"more than {_MAX_LEARNED_FEATURES}; use a projection with fewer channels"
                 )
+            if n_components is not None and (
+                isinstance(n_components, (bool, np.bool_)) or not isinstance(n_components, (int, np.integer))
+                or not 1 <= n_components <= F
+            ):
+                raise Error(f"invalid n_components = {n_components!r}: an integer in [1, {F}]")
             cls = self._classes(target)
             x = self.features.reshape(K, F)
             n = np.linalg.norm(x, axis=1, keepdims=True)
             x = np.divide(x, n, out=np.zeros_like(x), where=n > 0)
+            if noise is None:
+                warnings.warn(
+                    f"weights={weights!r} without counts= assume noise-free measurements: at a finite count "
+                    "level they can do far worse than weights=None (docs/classifier-weights.md). Pass the "
+                    "measurements' expected signal counts as counts= (math.inf for noise-free data)",
+                    NoiseFreeWeightsWarning,
+                    stacklevel=3,
+                )
+                tau = 0.0
+            else:
+                n_sig, n_bg = noise
+                # Poisson variance per unit-norm feature (module docstring)
+                tau = 1.0 / n_sig + (n_bg / F) * float(np.mean(np.abs(x).sum(axis=1) ** 2)) / n_sig**2
+            if weights == "whiten":
+                return _ridge_inv_sqrt(_residual_covariance(x, cls), tau, reg)
             n_cls = int(cls.max()) + 1
-            counts = np.bincount(cls, minlength=n_cls).astype(np.float64)
+            sizes = np.bincount(cls, minlength=n_cls).astype(np.float64)
             means = np.zeros((n_cls, F))
             np.add.at(means, cls, x)
-            means /= counts[:, None]
+            means /= sizes[:, None]
             r = x - means[cls]
-            dof = max(K - n_cls, 1)
-            s_w = r.T @ r / dof
-            lam = reg * (np.trace(s_w) / F if np.trace(s_w) > 0 else 1.0)
-            w0 = _inv_sqrt(s_w + lam * np.eye(F))
-            if weights == "whiten":
-                return w0
-            d = means - (counts @ means) / K
-            s_b = (d.T * counts) @ d / K
+            w0 = _ridge_inv_sqrt(r.T @ r / max(K - n_cls, 1), tau, reg)  # S_w
+            d = means - (sizes @ means) / K
+            s_b = (d.T * sizes) @ d / K
             mu, v = np.linalg.eigh(w0 @ s_b @ w0)
             mu, v = np.clip(mu[::-1], 0.0, None), v[:, ::-1]
             if n_components is not None:
-                if isinstance(n_components, (bool, np.bool_)) or not isinstance(n_components, (int, np.integer)) or not 1 <= n_components <= F:
-                    raise Error(f"invalid n_components = {n_components!r}: an integer in [1, {F}]")
                 mu, v = mu[:n_components], v[:, :n_components]
             return (np.sqrt(1.0 + mu)[:, None] * v.T) @ w0
         w = _finite_array(weights, "weights")
@@ -651,6 +744,78 @@ class Classifier:
             attitude_index=lab["attitude_index"][idx] if "attitude_index" in lab else None,
             attitude=lab["attitude"][idx] if "attitude" in lab else None,
         )
+
+
+def _noise_level(counts: Any, background: Any, learned: bool, weights: Any) -> tuple[float, float] | None:
+    """``(counts, background)`` checked, or None without ``counts`` (learned weights only)."""
+    if counts is None:
+        if not (isinstance(background, (int, float, np.integer, np.floating)) and not isinstance(background, bool)
+                and background == 0):
+            raise Error(f"invalid background = {background!r}: it applies only with counts= (counts = None)")
+        return None
+    if not learned:
+        raise Error(f"invalid counts = {counts!r}: it applies only to learned weights, \"whiten\" or \"lda\" "
+                    f"(weights = {weights!r})")
+    ok = isinstance(counts, (int, float, np.integer, np.floating)) and not isinstance(counts, (bool, np.bool_))
+    if not (ok and float(counts) > 0 and not np.isnan(counts)):
+        raise Error(f"invalid counts = {counts!r}: expected signal counts per measurement, > 0 (math.inf: noise-free)")
+    ok = isinstance(background, (int, float, np.integer, np.floating)) and not isinstance(background, (bool, np.bool_))
+    if not (ok and np.isfinite(background) and background >= 0):
+        raise Error(f"invalid background = {background!r}: expected background counts per measurement, a finite "
+                    "number >= 0")
+    return float(counts), float(background)
+
+
+def _ridge_inv_sqrt(s: np.ndarray, tau: float, reg: float) -> np.ndarray:
+    """``(s + (tau + lambda) I)^(-1/2)``, ``lambda = reg * trace(s) / F`` (module docstring)."""
+    F = len(s)
+    tr = float(np.trace(s))
+    lam = reg * (tr / F if tr > 0 else (tau if tau > 0 else 1.0))
+    return _inv_sqrt(s + (tau + lam) * np.eye(F))
+
+
+def _residual_covariance(x: np.ndarray, cls: np.ndarray, shrink: bool = True) -> np.ndarray:
+    """``S_r`` (module docstring) of unit rows ``x`` (K, F) with class indices ``cls`` (K,),
+    shrunk toward ``(trace / F) I`` by Ledoit and Wolf's weight unless ``shrink`` is False."""
+    K, F = x.shape
+    rows = np.unique(np.linspace(0, K - 1, min(K, _MAX_RESIDUALS)).round().astype(np.int64))
+    sampled = np.zeros(K, dtype=bool)
+    sampled[rows] = True
+    res = []
+    for c in np.unique(cls):
+        members = np.flatnonzero(cls == c)
+        if len(members) < 2:
+            continue
+        own = np.flatnonzero(sampled[members])  # positions in members of the sampled candidates
+        for i in range(0, len(own), 256):  # bound the (rows, members) cosine block
+            pos = own[i : i + 256]
+            g = x[members[pos]] @ x[members].T
+            g[np.arange(len(pos)), pos] = -np.inf  # not itself
+            res.append(x[members[pos]] - x[members[g.argmax(axis=1)]])
+    if not res:
+        return np.zeros((F, F))
+    r = np.concatenate(res)
+    n = len(r)
+    s = r.T @ r / n
+    if shrink:
+        rho = _ledoit_wolf(r, s)
+        s = (1.0 - rho) * s + rho * np.trace(s) / F * np.eye(F)
+    return s / 2.0
+
+
+def _ledoit_wolf(r: np.ndarray, s: np.ndarray) -> float:
+    """Ledoit and Wolf's (2004, J. Multivar. Anal. 88, 365, Lemma 3.2 and eq. 14) shrinkage
+    weight toward ``(trace(s) / F) I`` for the covariance ``s = r^T r / n`` of the rows ``r``
+    (n, F) (taken as zero-mean): ``min(b2, d2) / d2`` with ``d2 = |s - mu I|_F^2`` and
+    ``b2 = sum_i |r_i r_i^T - s|_F^2 / n^2``."""
+    n, F = r.shape
+    mu = np.trace(s) / F
+    d2 = float(np.sum(s * s) - 2.0 * mu * np.trace(s) + mu * mu * F)
+    if d2 <= 0:
+        return 0.0
+    sq = np.sum(r * r, axis=1)
+    b2 = float(np.sum(sq**2) - 2.0 * np.sum((r @ s) * r) + n * np.sum(s * s)) / n**2
+    return min(b2, d2) / d2
 
 
 def _is_dataset(x: Any) -> bool:
