@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
@@ -123,8 +124,6 @@ def _fit_settings(lidar: _lidar.Lidar, settings: Any, device: str, free: Sequenc
     else:
         raise Error(f'invalid settings = {settings!r}: None (continuous, the default), "lidar" or a pprender.Settings')
     if out.coverage != "analytic" and any(p in free for p in ("rx", "ry", "rz", "scale")):
-        import warnings
-
         warnings.warn(
             "ForwardModel: sampled coverage (pixel_samples) makes the expected counts step where a silhouette "
             "edge crosses a sample point, so the likelihood is piecewise flat in the attitude and scale: "
@@ -1097,8 +1096,6 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
 
 
 def _warn_untrustworthy(result: FitResult, what: str) -> None:
-    import warnings
-
     if result.problems:
         warnings.warn(f"{what}: the result is not trustworthy: " + "; ".join(result.problems), FitWarning, stacklevel=3)
     if result.alternatives:
@@ -1116,6 +1113,14 @@ _NLOPT_MESSAGES = {
     6: "maxtime reached", -1: "failure", -2: "invalid arguments", -3: "out of memory",
     -4: "roundoff limited", -5: "forced stop",
 }
+
+
+def _algorithm(algorithm: Any) -> str:
+    """The nlopt algorithm's canonical name (:data:`_ALGORITHMS`)."""
+    algo = str(algorithm).upper().replace("-", "").replace("_", "")
+    if algo not in _ALGORITHMS:
+        raise Error(f"invalid algorithm = {algorithm!r}: one of {_ALGORITHMS}")
+    return algo
 
 
 def _per_parameter(value: Any, name: str, model: ForwardModel) -> np.ndarray:
@@ -1220,9 +1225,7 @@ def fit_nlopt(
     """
     if not isinstance(model, ForwardModel):
         raise Error(f"invalid model of type {type(model).__name__}: expected ForwardModel")
-    algo = str(algorithm).upper().replace("-", "").replace("_", "")
-    if algo not in _ALGORITHMS:
-        raise Error(f"invalid algorithm = {algorithm!r}: one of {_ALGORITHMS}")
+    algo = _algorithm(algorithm)
     x0 = _x0(model, x0)
     model._counts(measurement)  # validate the data once
     if isinstance(n_starts, (bool, np.bool_)) or not isinstance(n_starts, (int, np.integer)) or n_starts < 1:
@@ -1467,9 +1470,7 @@ def maximum_likelihood(
     """
     if not isinstance(model, ForwardModel):
         raise Error(f"invalid model of type {type(model).__name__}: expected ForwardModel")
-    algo = str(algorithm).upper().replace("-", "").replace("_", "")
-    if algo not in _ALGORITHMS:
-        raise Error(f"invalid algorithm = {algorithm!r}: one of {_ALGORITHMS}")
+    algo = _algorithm(algorithm)
     model._counts(measurement)
     d = model.ndim
     n_glob = 128 * d if n_global is None else n_global
@@ -1757,7 +1758,5 @@ def sample_emcee(
     if check:
         summary = chain_summary(sampler, model.names)
         if summary.problems:
-            import warnings
-
             warnings.warn("sample_emcee: " + "; ".join(summary.problems), FitWarning, stacklevel=2)
     return sampler

@@ -173,16 +173,7 @@ class RenderResult:
         edges = np.asarray(self.bin_edges)
         if edges.ndim != 1 or len(edges) < 2:
             raise Error(f"invalid RenderResult.bin_edges: shape {edges.shape}, expected (B + 1,) with B >= 1")
-        img = ("attitude", "row", "col")
-        dims = {
-            "cross_section": ("attitude",) + pol,
-            "profile": ("attitude", "range") + pol,
-            "mueller": img + ("mueller_row", "mueller_col"),
-            "stokes": img + ("stokes",),
-            "intensity": img,
-            "range": img,
-            "coverage": img,
-        }
+        dims = _field_dims(pol)
         units = {"coverage": "1", "range": "m"}
         names = {
             "cross_section": "total lidar cross-section",
@@ -308,16 +299,7 @@ class RenderResult:
         if cs is None:
             raise Error(f"invalid {where}: no variable 'cross_section'")
         pol = tuple(d for d in cs.dims if d != "attitude")
-        img = ("attitude", "row", "col")
-        dims = {
-            "cross_section": ("attitude",) + pol,
-            "profile": ("attitude", "range") + pol,
-            "mueller": img + ("mueller_row", "mueller_col"),
-            "stokes": img + ("stokes",),
-            "intensity": img,
-            "range": img,
-            "coverage": img,
-        }
+        dims = _field_dims(pol)
         fields: dict[str, Any] = {}
         for fname, d in dims.items():
             vname = _VARIABLE.get(fname, fname)
@@ -394,6 +376,20 @@ class RenderResult:
             RenderResult (a Measurement included), or one written in a newer format.
         """
         return cls.from_xarray(_io.read(path, "RenderResult"))
+
+
+def _field_dims(pol: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
+    """Each field's dimensions in the saved layout, ``pol`` the polarization dimensions."""
+    img = ("attitude", "row", "col")
+    return {
+        "cross_section": ("attitude",) + pol,
+        "profile": ("attitude", "range") + pol,
+        "mueller": img + ("mueller_row", "mueller_col"),
+        "stokes": img + ("stokes",),
+        "intensity": img,
+        "range": img,
+        "coverage": img,
+    }
 
 
 # The image fields' variable names (``stokes`` and ``range`` are dimensions).
