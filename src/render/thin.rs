@@ -157,8 +157,43 @@ impl ThinPixels {
         vertices: &[V3],
         lay: &Layout,
     ) -> Self {
+        Self::build(mesh, thinness, rot, vertices, lay, false)
+    }
+
+    /// [`ThinPixels::new`] for analytic coverage: besides the thin faces, in every pixel
+    /// that an outline edge crosses, every face turned toward the receiver that overlaps
+    /// it ([`outline_pairs`]). The kernel's candidates are the triangles seen at the
+    /// centres of a pixel's 3x3 neighbourhood and their neighbours across edges: a face
+    /// seen only as a sliver between two centres beside another body's outline (a bus face
+    /// in the strip beside a body-mounted panel's rim) was missing from them, and the
+    /// pixel's area went to its other parts, hidden ones included (the 3U CubeSat with body
+    /// panels at 48 px: the total 8% high within a 20-degree range of rolls about the line
+    /// of sight, exact at others). A pixel no outline crosses is covered by one connected
+    /// layer of front faces, which the centres' triangles and their neighbours reach.
+    pub fn with_outlines(
+        mesh: &Mesh,
+        thinness: &[[f64; 4]],
+        rot: &Rot,
+        vertices: &[V3],
+        lay: &Layout,
+    ) -> Self {
+        Self::build(mesh, thinness, rot, vertices, lay, true)
+    }
+
+    fn build(
+        mesh: &Mesh,
+        thinness: &[[f64; 4]],
+        rot: &Rot,
+        vertices: &[V3],
+        lay: &Layout,
+        outlines: bool,
+    ) -> Self {
         let w = lay.width;
-        let mut pairs = Vec::new();
+        let mut pairs = if outlines {
+            outline_pairs(mesh, vertices, lay)
+        } else {
+            Vec::new()
+        };
         for (t, a) in thinness.iter().enumerate() {
             if !is_thin(a, rot, lay.pix) {
                 continue;
@@ -173,33 +208,9 @@ impl ThinPixels {
             if !den.is_finite() || den == 0.0 || (mesh.face_closed[t] && den > 0.0) {
                 continue;
             }
-            let (v_lo, v_hi) = uv
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                    (lo.min(p[1]), hi.max(p[1]))
-                });
-            let rows = (v_lo.floor().max(0.0) as usize)..(v_hi.ceil().min(w as f64) as usize);
-            for row in rows {
-                let strip = clip_rows(&uv, row as f64);
-                if strip.len() < 3 {
-                    continue;
-                }
-                let (u_lo, u_hi) = strip
-                    .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                        (lo.min(p[0]), hi.max(p[0]))
-                    });
-                let lo = u_lo.floor().max(0.0) as usize;
-                let hi = (u_hi.floor() + 1.0).min(w as f64) as usize;
-                for col in lo..hi {
-                    // (only where it covers some of the pixel: a pixel it merely touches
-                    // keeps its samples, as the same pixel of the same surface cut into
-                    // more triangles would)
-                    if overlap_area(&strip, col as f64) > MIN_OVERLAP {
-                        pairs.push(((row * w + col) as u32, t as u32));
-                    }
-                }
-            }
+            // (only where it covers some of the pixel: a pixel it merely touches keeps its
+            // samples, as the same pixel of the same surface cut into more triangles would)
+            face_pixels(&uv, w, |pixel| pairs.push((pixel as u32, t as u32)));
         }
         pairs.sort_unstable();
         pairs.dedup();
@@ -270,6 +281,136 @@ pub fn gpu_words(chunk: &[ThinPixels], n_pix: usize) -> Vec<u32> {
         }
     }
     words
+}
+
+/// `(pixel, face)` for every pixel that an outline edge crosses (an edge across which the
+/// projection folds over: the face beyond it turned the other way or edge-on, or a
+/// boundary edge) and every face turned toward the receiver (both sides of an open mesh's
+/// faces, as the clipping takes them) that overlaps that pixel by more than
+/// [`MIN_OVERLAP`].
+fn outline_pairs(mesh: &Mesh, vertices: &[V3], lay: &Layout) -> Vec<(u32, u32)> {
+    let w = lay.width;
+    let uvs: Vec<[[f64; 2]; 3]> = mesh
+        .faces
+        .iter()
+        .map(|f| {
+            f.map(|k| {
+                let p = vertices[k as usize];
+                [(p[0] + lay.ext) / lay.pix, (lay.ext - p[1]) / lay.pix]
+            })
+        })
+        .collect();
+    let den: Vec<f64> = uvs
+        .iter()
+        .map(|uv| {
+            (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
+                - (uv[1][1] - uv[0][1]) * (uv[2][0] - uv[0][0])
+        })
+        .collect();
+    // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
+    let front = |t: usize| {
+        let d = den[t];
+        d.is_finite() && d != 0.0 && !(mesh.face_closed[t] && d > 0.0)
+    };
+    let adj = mesh.adjacency();
+    let mut outline = vec![false; w * w];
+    let mut any = false;
+    for (t, uv) in uvs.iter().enumerate() {
+        if !front(t) {
+            continue;
+        }
+        for k in 0..3 {
+            let u = adj[t][k] as usize;
+            if u >= mesh.faces.len() || !(den[u] * den[t] > 0.0) {
+                segment_pixels(uv[k], uv[(k + 1) % 3], w, |pixel| {
+                    outline[pixel] = true;
+                    any = true;
+                });
+            }
+        }
+    }
+    let mut pairs = Vec::new();
+    if !any {
+        return pairs;
+    }
+    for (t, uv) in uvs.iter().enumerate() {
+        if front(t) {
+            face_pixels(uv, w, |pixel| {
+                if outline[pixel] {
+                    pairs.push((pixel as u32, t as u32));
+                }
+            });
+        }
+    }
+    pairs
+}
+
+/// Every pixel (`row * w + col`) that the triangle `uv` (pixel coordinates) covers by more
+/// than [`MIN_OVERLAP`].
+fn face_pixels(uv: &[[f64; 2]; 3], w: usize, mut visit: impl FnMut(usize)) {
+    let (v_lo, v_hi) = uv
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p[1]), hi.max(p[1]))
+        });
+    let rows = (v_lo.floor().max(0.0) as usize)..(v_hi.ceil().min(w as f64) as usize);
+    for row in rows {
+        let strip = clip_rows(uv, row as f64);
+        if strip.len() < 3 {
+            continue;
+        }
+        let (u_lo, u_hi) = strip
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p[0]), hi.max(p[0]))
+            });
+        let lo = u_lo.floor().max(0.0) as usize;
+        let hi = (u_hi.floor() + 1.0).min(w as f64) as usize;
+        for col in lo..hi {
+            if overlap_area(&strip, col as f64) > MIN_OVERLAP {
+                visit(row * w + col);
+            }
+        }
+    }
+}
+
+/// Every pixel (`row * w + col`) of a `w x w` image that the segment `a`-`b` (pixel
+/// coordinates, `u` along the columns, `v` down the rows) passes through or touches: per
+/// row it spans, the columns of its part within that row.
+fn segment_pixels(a: [f64; 2], b: [f64; 2], w: usize, mut visit: impl FnMut(usize)) {
+    if !(a.iter().chain(b.iter()).all(|x| x.is_finite())) {
+        return;
+    }
+    let wf = w as f64;
+    let (v_lo, v_hi) = (a[1].min(b[1]), a[1].max(b[1]));
+    if v_hi < 0.0 || v_lo > wf {
+        return;
+    }
+    let r0 = v_lo.floor().max(0.0) as usize;
+    let r1 = (v_hi.floor() as usize).min(w - 1);
+    for row in r0..=r1 {
+        // the segment's part with v in [row, row + 1]
+        let (s0, s1) = if b[1] == a[1] {
+            (0.0, 1.0)
+        } else {
+            let ta = (row as f64 - a[1]) / (b[1] - a[1]);
+            let tb = (row as f64 + 1.0 - a[1]) / (b[1] - a[1]);
+            (ta.min(tb).max(0.0), ta.max(tb).min(1.0))
+        };
+        if s0 > s1 {
+            continue;
+        }
+        let (u0, u1) = (a[0] + s0 * (b[0] - a[0]), a[0] + s1 * (b[0] - a[0]));
+        let (u_lo, u_hi) = (u0.min(u1), u0.max(u1));
+        if u_hi < 0.0 || u_lo > wf {
+            continue;
+        }
+        let c0 = u_lo.floor().max(0.0) as usize;
+        let c1 = (u_hi.floor() as usize).min(w - 1);
+        for col in c0..=c1 {
+            visit(row * w + col);
+        }
+    }
 }
 
 /// The part of triangle `uv` (pixel coordinates) between `v = row` and `v = row + 1`.

@@ -361,7 +361,13 @@ fn render_pixels(
     let prepare = |rot: &Rot, in_parallel: bool| {
         let vertices = rotate_vertices(mesh, rot);
         let thin = thinness
-            .map(|a| ThinPixels::new(mesh, a, rot, &vertices, &lay))
+            .map(|a| {
+                if sensor.analytic {
+                    ThinPixels::with_outlines(mesh, a, rot, &vertices, &lay)
+                } else {
+                    ThinPixels::new(mesh, a, rot, &vertices, &lay)
+                }
+            })
             .unwrap_or_default();
         if thin_only && thin.is_empty() {
             // nothing to shade: no raster

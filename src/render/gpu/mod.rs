@@ -174,7 +174,7 @@ fn render_chunks(
         let m = (n - start).min(c);
         let rots = &rotations[start..start + m];
         let t = Instant::now();
-        let thin_words = thin_words(mesh, thinness, rots, lay, gpu)?;
+        let thin_words = thin_words(mesh, thinness, sensor.analytic, rots, lay, gpu)?;
         let bindings = ChunkBindings::new(
             gpu,
             &scene,
@@ -228,6 +228,7 @@ fn render_chunks(
 fn thin_words(
     mesh: &Mesh,
     thinness: Option<&[[f64; 4]]>,
+    outlines: bool,
     rots: &[Rot],
     lay: &Layout,
     gpu: &Gpu,
@@ -240,7 +241,11 @@ fn thin_words(
         .par_iter()
         .map(|r| {
             let vertices = crate::render::cpu::rotate_vertices(mesh, r);
-            thin::ThinPixels::new(mesh, a, r, &vertices, lay)
+            if outlines {
+                thin::ThinPixels::with_outlines(mesh, a, r, &vertices, lay)
+            } else {
+                thin::ThinPixels::new(mesh, a, r, &vertices, lay)
+            }
         })
         .collect();
     let words = thin::gpu_words(&per, lay.width * lay.width);
