@@ -122,6 +122,13 @@ def test_attitude_frames_and_attitude_error():
     assert fit.attitude_error(qa, [1.0, 0, 0, 0]) == pytest.approx(0.3, abs=1e-14)
     np.testing.assert_allclose(fit.attitude_error(tel.rotations([r, r]), body.rotations([r, r])),
                                [fit.attitude_error(tel.rotations(r)[0], body.rotations(r)[0])] * 2)
+    # "roll": the swing (rx, ry, 0) then the roll rz about the line of sight Z, before R_ref
+    roll = fit.ForwardModel(mesh, metal(), inst, [-0.1, 0.1], attitude_frame="roll", **kw)
+    expect = Rotation.from_euler("Z", 0.4) * Rotation.from_rotvec([0.2, -0.1, 0.0]) * Rotation.from_matrix(r_ref)
+    np.testing.assert_allclose(roll.rotations(r)[0], expect.as_matrix(), atol=1e-14)
+    # the roll turns the body about Z and nothing else: where Z meets the body is kept
+    z_body = roll.rotations([[0.2, -0.1, -1.3], [0.2, -0.1, 2.0]]).transpose(0, 2, 1)[:, :, 2]
+    np.testing.assert_allclose(z_body[0], z_body[1], atol=1e-14)
 
 
 # ---------------------------------------------------------------------- forward model

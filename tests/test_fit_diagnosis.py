@@ -47,7 +47,7 @@ def panels():
     def model(**kw):
         return fit.ForwardModel(mesh, sat["model_materials"](), inst, data.bin_edges, sat["free"],
                                 lidar=pprender.Lidar(resolution=48, supersampling=2, pixel_samples=1),
-                                fixed=sat["fixed"], bounds=sat["bounds"], fitted_parts=sat["fitted_parts"], **kw)
+                                fixed={"rz": 0.3}, bounds=sat["bounds"], fitted_parts=sat["fitted_parts"], **kw)
 
     return model, data, mesh, inst
 
@@ -154,6 +154,34 @@ def test_maximum_likelihood_from_no_start_finds_the_truth_or_reports_its_mode():
     assert s["within_3"] == 1.0 and s["unconstrained"] == 1 and s["n"] == 2
 
 
+def test_mirror_views_find_the_truths_mode_from_its_mirror(panels):
+    """Regression (docs/fit-recovery.md, panels truth 10): a fit found only the view of the
+    body mirrored about one of its planes, 182 sd from the truth, and called itself
+    trustworthy. Started at the mirror view of the truth (the best of the truth's 47
+    signed-permutation views other than itself), with no global stage, the local fit stays
+    there; the mirror views of step 3 reach the truth's own mode (within 3 sd)."""
+    _, data, mesh, inst = panels
+    sat = fit_recovery.SATELLITES["panels"]
+    model = fit.ForwardModel(mesh, sat["model_materials"](), inst, data.bin_edges, sat["free"],
+                             lidar=pprender.Lidar(resolution=48, supersampling=2), attitude_frame="roll",
+                             bounds=sat["bounds"], fitted_parts=sat["fitted_parts"])
+    att = Rotation.from_rotvec(sat["rotvec"](TRUTH)).as_matrix()[None]
+    truth = fit.attitude_starts(model, att, x0=[0.0, 0.0, TRUTH[2]])[0]
+    views = fit._mirror_starts(model, truth)
+    ll = model.log_likelihood(views, data)
+    mirror = views[np.argmax(np.where(np.max(np.abs(views - truth), axis=1) > 0.05, ll, -np.inf))]
+    sd = np.sqrt(np.diag(np.linalg.inv(fit.fisher_information(model, truth))))
+
+    def nearest_z(r):
+        return min(float(np.max(np.abs((x - truth) / sd))) for _, x, _ in r.starts)
+
+    kw = dict(x0=mirror, n_global=0, diagnose=False)
+    without = fit.maximum_likelihood(model, data, n_mirror=0, **kw)
+    with_views = fit.maximum_likelihood(model, data, n_mirror=4, **kw)
+    assert nearest_z(without) > 10, nearest_z(without)
+    assert nearest_z(with_views) < 3, nearest_z(with_views)
+
+
 def test_maximum_likelihood_bad_arguments(panels):
     make, data, _, _ = panels
     model = make()
@@ -161,6 +189,8 @@ def test_maximum_likelihood_bad_arguments(panels):
         fit.maximum_likelihood(model, data, n_global=0)
     with pytest.raises(pprender.Error, match="n_local"):
         fit.maximum_likelihood(model, data, n_local=0)
+    with pytest.raises(pprender.Error, match="n_mirror"):
+        fit.maximum_likelihood(model, data, n_mirror=48)
     with pytest.raises(pprender.Error, match="starts"):
         fit.maximum_likelihood(model, data, starts=[[5.0, 0.0, 0.3]], n_global=0)
     with pytest.raises(pprender.Error, match="algorithm"):
@@ -172,10 +202,10 @@ def test_maximum_likelihood_bad_arguments(panels):
 def test_attitude_starts_invert_the_model_rotations(panels):
     _, data, mesh, inst = panels
     ref = Rotation.from_rotvec([0.2, -0.1, 0.4]).as_matrix()
-    for frame in ("telescope", "body"):
+    for frame in ("telescope", "body", "roll"):
         model = fit.ForwardModel(mesh, "aluminium", inst, data.bin_edges, ("rz", "ry", "rx", "alpha"),
                                  reference_attitude=ref, attitude_frame=frame, bounds={"alpha": (0.05, 0.8)})
-        theta = np.array([[0.3, -0.5, 0.7, 0.2], [-0.1, 0.2, -0.9, 0.6]])
+        theta = np.array([[0.3, -0.5, 0.7, 0.2], [-0.1, 0.2, -0.9, 0.6], [-2.0, 1.2, -1.5, 0.3]])  # (third: large roll and swing)
         got = fit.attitude_starts(model, model.rotations(theta), x0=[0, 0, 0, 0.25])
         np.testing.assert_allclose(got[:, :3], theta[:, :3], atol=1e-12)
         assert np.all(got[:, 3] == 0.25)

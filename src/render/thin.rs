@@ -321,7 +321,9 @@ fn outline_pairs(mesh: &Mesh, vertices: &[V3], lay: &Layout) -> Vec<(u32, u32)> 
         }
         for k in 0..3 {
             let u = adj[t][k] as usize;
-            if u >= mesh.faces.len() || !(den[u] * den[t] > 0.0) {
+            // (a neighbour turned the same way has `den` of the same sign; NaN is not)
+            let same_way = u < mesh.faces.len() && den[u] * den[t] > 0.0;
+            if !same_way {
                 segment_pixels(uv[k], uv[(k + 1) % 3], w, |pixel| {
                     outline[pixel] = true;
                     any = true;

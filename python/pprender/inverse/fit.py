@@ -8,7 +8,16 @@ Conventions (written once here):
     ``R = exp([r]x) R_ref`` with ``attitude_frame="telescope"`` (``r`` in the telescope
     frame ``X, Y, Z``, ``Z`` toward the receiver: ``rz`` rolls about the line of sight) or
     ``R = R_ref exp([r]x)`` with ``attitude_frame="body"`` (``r`` in the body frame, e.g.
-    ``rz`` a spin about the body's z axis). ``R_ref`` is ``reference_attitude``
+    ``rz`` a spin about the body's z axis), or ``R = exp(rz [Z]x) exp([(rx, ry, 0)]x) R_ref``
+    with ``attitude_frame="roll"`` (swing then twist: ``(rx, ry)`` a rotation about an axis
+    across the line of sight, which sets the direction the body is seen from, then ``rz``
+    a roll about the line of sight). Monostatic, with one bounce, the profile does not
+    depend on the roll at all (a facet seen in backscatter is a mirror at normal incidence,
+    the same for every orientation of the polarization; ``tests/test_render.py`` checks
+    the invariance): fit ``(rx, ry)`` in the ``"roll"`` frame and leave ``rz`` fixed. With
+    ``rx, ry, rz`` all free in another frame the roll is a curved valley of constant
+    likelihood through the parameter space, which local fits and the Gaussian
+    uncertainties do not describe (docs/fit-recovery.md). ``R_ref`` is ``reference_attitude``
     (default identity); ``R`` maps body to telescope coordinates as in :func:`pprender.render`.
   - ``alpha``: microfacet roughness of the fitted materials (Beckmann/GGX ``alpha``;
     converted to ``m`` for Blinn-Phong as :class:`pprender.Material` does).
@@ -222,6 +231,29 @@ def _attitude_matrices(r: Any, name: str) -> np.ndarray:
     return a
 
 
+def _frame_rotation(r: np.ndarray, frame: str) -> np.ndarray:
+    """(n, 3, 3) ``E(r)`` of :class:`ForwardModel`'s attitude frames (module docstring):
+    ``exp([r]x)``, or for ``"roll"`` ``exp(r_z [Z]x) exp([(r_x, r_y, 0)]x)``."""
+    r = np.asarray(r, dtype=np.float64).reshape(-1, 3)
+    if frame != "roll":
+        return Rotation.from_rotvec(r).as_matrix()
+    swing = Rotation.from_rotvec(np.column_stack([r[:, 0], r[:, 1], np.zeros(len(r))]))
+    return (Rotation.from_rotvec(np.column_stack([np.zeros((len(r), 2)), r[:, 2]])) * swing).as_matrix()
+
+
+def _frame_parameters(E: np.ndarray, frame: str) -> np.ndarray:
+    """(n, 3) ``r`` with ``_frame_rotation(r, frame) = E`` (angles in [-pi, pi])."""
+    rot = Rotation.from_matrix(np.asarray(E).reshape(-1, 3, 3))
+    if frame != "roll":
+        return rot.as_rotvec()
+    # twist about Z: the angle of the quaternion's (w, z) part; the swing what is left
+    q = rot.as_quat()  # (x, y, z, w)
+    twist = 2.0 * np.arctan2(q[:, 2], q[:, 3])
+    twist = (twist + np.pi) % (2 * np.pi) - np.pi
+    swing = Rotation.from_rotvec(np.column_stack([np.zeros((len(q), 2)), -twist])) * rot
+    return np.column_stack([swing.as_rotvec()[:, :2], twist])
+
+
 def attitude_error(r_a: Any, r_b: Any) -> Any:
     """Rotation angle (rad, in [0, pi]) of ``R_a R_b^T``: the angle between attitudes.
 
@@ -313,8 +345,9 @@ class ForwardModel:
         ``R_ref`` (default identity): one rotation matrix, one ``(w, x, y, z)`` quaternion
         (scalar first) or a single :class:`scipy.spatial.transform.Rotation` (a stack of
         one is accepted, of several refused).
-    attitude_frame : {"telescope", "body"}
-        Frame of the rotation vector (module docstring).
+    attitude_frame : {"telescope", "body", "roll"}
+        Frame of the rotation vector (module docstring); ``"roll"`` separates the roll
+        about the line of sight, which a monostatic single-bounce profile cannot see.
     fitted_parts : sequence of str or int, optional
         Material entries (part names, or indices into the material list) that
         ``alpha``/``n``/``k`` apply to; default all.
@@ -331,8 +364,8 @@ class ForwardModel:
         ``coverage="analytic"`` (each pixel's visible area clipped exactly), so that the
         expected counts, and the likelihood, are continuous in the attitude and the scale;
         and, where ``device`` resolves to a CPU (lavapipe), ``arithmetic="f64"``, the
-        native CPU renderer (as fast there as sampled coverage on lavapipe). With sampled
-        visibility (``pixel_samples``) the profile steps whenever a silhouette edge crosses a
+        native CPU renderer (about twice the cost of one sampled visibility sample on
+        lavapipe, docs/fit-smoothness.md). With sampled visibility (``pixel_samples``) the profile steps whenever a silhouette edge crosses a
         sample point: the likelihood is piecewise flat along the attitude, local optimizers
         stop on its steps, and finite-difference Fisher information is wrong
         (docs/fit-recovery.md measures both). ``"lidar"`` renders with the ``lidar``'s own
@@ -418,8 +451,8 @@ class ForwardModel:
             hi.append(hi_)
         self.lower = np.array(lo)
         self.upper = np.array(hi)
-        if attitude_frame not in ("telescope", "body"):
-            raise Error(f'invalid attitude_frame = {attitude_frame!r}: "telescope" or "body"')
+        if attitude_frame not in ("telescope", "body", "roll"):
+            raise Error(f'invalid attitude_frame = {attitude_frame!r}: "telescope", "body" or "roll"')
         self.attitude_frame = attitude_frame
         if reference_attitude is None:
             self.reference_attitude = np.eye(3)
@@ -540,10 +573,10 @@ class ForwardModel:
         return self._rotations(self._full(th))
 
     def _rotations(self, full: np.ndarray) -> np.ndarray:
-        e = Rotation.from_rotvec(full[:, :3]).as_matrix()
-        if self.attitude_frame == "telescope":
-            return e @ self.reference_attitude
-        return self.reference_attitude @ e
+        e = _frame_rotation(full[:, :3], self.attitude_frame)
+        if self.attitude_frame == "body":
+            return self.reference_attitude @ e
+        return e @ self.reference_attitude
 
     # -------------------------------------------------------------- scenes
 
@@ -1337,8 +1370,8 @@ def _global_points(model: ForwardModel, n: int, seed: int) -> np.ndarray:
             q = so3.grid(m)
             R = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
             ref = model.reference_attitude
-            E = R @ ref.T if model.attitude_frame == "telescope" else ref.T @ R
-            r = Rotation.from_matrix(E).as_rotvec()
+            E = ref.T @ R if model.attitude_frame == "body" else R @ ref.T
+            r = _frame_parameters(E, model.attitude_frame)
             ok = np.all((r >= model.lower[rot]) & (r <= model.upper[rot]), axis=1)
             if ok.sum() >= n:
                 pick = np.flatnonzero(ok)
@@ -1348,13 +1381,32 @@ def _global_points(model: ForwardModel, n: int, seed: int) -> np.ndarray:
     return pts
 
 
+def _mirror_starts(model: ForwardModel, x: np.ndarray) -> np.ndarray:
+    """(47, ndim) starts seeing the body from its line of sight at ``x`` mapped by the
+    other signed permutations of the body axes (:func:`maximum_likelihood`, step 3)."""
+    import itertools
+
+    d = model.rotations(x)[0][2]  # R^T Z: the line of sight in the body frame
+    z = np.array([[0.0, 0.0, 1.0]])
+    mats = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            if perm == (0, 1, 2) and signs == (1.0, 1.0, 1.0):
+                continue
+            dm = np.asarray(signs) * d[list(perm)]
+            C, _ = Rotation.align_vectors(z, dm[None])  # C dm = Z: seen from dm
+            mats.append(C.as_matrix())
+    return attitude_starts(model, np.array(mats), x0=x)
+
+
 def attitude_starts(model: ForwardModel, attitudes: Any, x0: Any = None) -> np.ndarray:
     """Start points (n, ndim) of ``model`` at given attitudes.
 
     E.g. a classifier's best candidates (``Classifier.top_k(data, k).attitude[0]``).
 
-    The rotation vector is ``log(R R_ref^T)`` (``attitude_frame="telescope"``) or
-    ``log(R_ref^T R)`` (``"body"``); its free components are kept (fixed ones stay fixed,
+    The rotation vector is ``log(R R_ref^T)`` (``attitude_frame="telescope"``),
+    ``log(R_ref^T R)`` (``"body"``) or the swing and twist of ``R R_ref^T`` (``"roll"``);
+    its free components are kept (fixed ones stay fixed,
     so an attitude is projected onto the free ones), clipped into the bounds. The other
     free parameters take ``x0``'s values, or the middle of their bounds.
 
@@ -1381,8 +1433,8 @@ def attitude_starts(model: ForwardModel, attitudes: Any, x0: Any = None) -> np.n
     """
     R = _attitude_matrices(attitudes, "attitudes").reshape(-1, 3, 3)
     ref = model.reference_attitude
-    E = R @ ref.T if model.attitude_frame == "telescope" else ref.T @ R
-    r = Rotation.from_matrix(E).as_rotvec()
+    E = ref.T @ R if model.attitude_frame == "body" else R @ ref.T
+    r = _frame_parameters(E, model.attitude_frame)
     base = 0.5 * (model.lower + model.upper) if x0 is None else _x0(model, x0)
     pts = np.repeat(base[None], len(R), axis=0)
     for j, p in enumerate(("rx", "ry", "rz")):
@@ -1404,6 +1456,7 @@ def maximum_likelihood(
     ftol_abs: float = 1e-6,
     seed: int = 0,
     diagnose: bool = True,
+    n_mirror: int = 8,
 ) -> FitResult:
     """The robust maximum-likelihood fit: a global stage, local fits, a diagnosis.
 
@@ -1416,7 +1469,18 @@ def maximum_likelihood(
     2. **Local stage.** :func:`fit_nlopt`'s optimizer from the ``n_local`` best of them that
        lie apart (more than the global points' spacing), with an initial step of half that
        spacing, plus ``x0`` and every ``starts`` point; the best optimum wins.
-    3. **Diagnosis** (:func:`diagnose_fit`): Cramer-Rao uncertainties, the curvature of
+    3. **Mirror views** (with ``rx`` and ``ry`` free): a body symmetric about planes
+       through its axes (as :mod:`pprender.models` builds satellites) gives the same
+       profile seen from the directions its line of sight takes under those symmetries,
+       and the search above often finds only one of them (docs/fit-recovery.md: a fit
+       that found the mirror view alone, 182 sd from the truth, and called itself
+       trustworthy). The line of sight in the body frame at the best optimum, ``d``, is
+       mapped by the 47 other signed permutations of its components; the attitudes that
+       see the body from there (other parameters as at the optimum, rotations projected
+       onto the free ones by :func:`attitude_starts`) are evaluated in one batch, and local
+       fits run from the ``n_mirror`` best that lie apart. Their optima join the others:
+       those as likely as the best are reported as ``alternatives``.
+    4. **Diagnosis** (:func:`diagnose_fit`): Cramer-Rao uncertainties, the curvature of
        ``log L`` against the Fisher information, convergence, goodness of fit and the
        agreement of the local starts; a :class:`FitWarning` when it finds problems.
 
@@ -1451,6 +1515,9 @@ def maximum_likelihood(
         Seed of the global points and of the diagnosis' draws, >= 0. Default 0.
     diagnose : bool, optional
         Run the diagnosis (default True).
+    n_mirror : int, optional
+        Local fits from the best optimum's mirror views (step 3), in [0, 47]; default 8, 0
+        skips them.
 
     Returns
     -------
@@ -1474,7 +1541,7 @@ def maximum_likelihood(
     model._counts(measurement)
     d = model.ndim
     n_glob = 128 * d if n_global is None else n_global
-    for name, v, lo, hi in (("n_global", n_glob, 0, 100_000), ("n_local", n_local, 1, 64),
+    for name, v, lo, hi in (("n_global", n_glob, 0, 100_000), ("n_local", n_local, 1, 64), ("n_mirror", n_mirror, 0, 47),
                             ("maxeval", maxeval, 1, 10**9), ("seed", seed, 0, 2**63 - 1)):
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
             raise Error(f"invalid {name} = {v!r}: an integer in [{lo}, {hi}]")
@@ -1522,6 +1589,23 @@ def maximum_likelihood(
     step = 0.5 * spacing if n_glob > 0 else 0.05 * width
     result = _local_fits(model, measurement, local, algo, ftol, 1e-8 * width, int(maxeval), step)
     result.n_evaluations += n_eval
+    if n_mirror > 0 and "rx" in model.names and "ry" in model.names:
+        views = _mirror_starts(model, result.x)
+        ll = model.log_likelihood(views, measurement)
+        result.n_evaluations += len(views)
+        chosen = []
+        for i in np.argsort(-ll):
+            if not math.isfinite(ll[i]) or len(chosen) >= n_mirror:
+                break
+            if all(np.max(np.abs(views[i] - c) / spacing) > 0.5 for c in chosen + [result.x]):
+                chosen.append(views[i])
+        if chosen:
+            more = _local_fits(model, measurement, chosen, algo, ftol, 1e-8 * width, int(maxeval), step)
+            result.n_evaluations += more.n_evaluations
+            result.starts = list(result.starts) + list(more.starts)
+            if more.log_likelihood > result.log_likelihood:
+                result.x, result.log_likelihood = more.x, more.log_likelihood
+                result.return_code, result.message = more.return_code, more.message
     result.seconds = time.perf_counter() - t0
     if diagnose:
         result = diagnose_fit(model, measurement, result, seed=seed)
