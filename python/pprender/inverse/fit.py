@@ -365,10 +365,11 @@ class ForwardModel:
         expected counts, and the likelihood, are continuous in the attitude and the scale;
         and, where ``device`` resolves to a CPU (lavapipe), ``arithmetic="f64"``, the
         native CPU renderer (about twice the cost of one sampled visibility sample on
-        lavapipe, docs/fit-smoothness.md). With sampled visibility (``pixel_samples``) the profile steps whenever a silhouette edge crosses a
-        sample point: the likelihood is piecewise flat along the attitude, local optimizers
-        stop on its steps, and finite-difference Fisher information is wrong
-        (docs/fit-recovery.md measures both). ``"lidar"`` renders with the ``lidar``'s own
+        lavapipe, docs/fit-smoothness.md). With sampled visibility (``pixel_samples``)
+        the profile steps whenever a silhouette edge crosses a sample point: the likelihood
+        is piecewise flat along the attitude, local optimizers stop on its steps, and
+        finite-difference Fisher information is wrong (docs/fit-smoothness.md measures
+        both). ``"lidar"`` renders with the ``lidar``'s own
         settings; a :class:`pprender.Settings` is used as given. Settings with sampled
         coverage and a free attitude or scale warn (:class:`FitWarning`).
     alpha_step : float or None, optional
