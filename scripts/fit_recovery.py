@@ -136,7 +136,8 @@ def one_truth(name: str, truth: np.ndarray, index: int, n_global: int | None = N
     data = ins.measure(tr, inst, seed=index)[0]
     model = fit.ForwardModel(mesh, sat["model_materials"](), inst, data.bin_edges, sat["free"],
                              lidar=pprender.Lidar(resolution=RESOLUTION, supersampling=2), attitude_frame="roll",
-                             bounds=sat["bounds"], fitted_parts=sat["fitted_parts"])
+                             bounds=sat["bounds"], fitted_parts=sat["fitted_parts"],
+                             alpha_step=0.05)  # (as run for docs/fit-recovery.md; "auto" now renders this bus exactly)
     # the truth in the fitted parameters: the swing of its attitude (the roll is not seen)
     drawn = truth
     alpha = sat["alpha"](drawn)

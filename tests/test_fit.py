@@ -232,11 +232,12 @@ def test_vectorized_log_prob_renders_once_and_equals_single_calls(cube, monkeypa
     batch = mat.log_prob(th, meas)
     assert sorted(calls) == [1, 2, 3]
     np.testing.assert_array_equal(batch, [mat.log_prob(t, meas) for t in th])
-    # interpolated in alpha (the default): one render per alpha node, the walkers of a node
-    # together; a batch equals single calls
+    # interpolated in alpha (the default for materials slow to build; asked for here): one
+    # render per alpha node, the walkers of a node together; a batch equals single calls
     calls.clear()
     nodes = fit.ForwardModel(model_mesh(), metal(), inst, res.bin_edges, ("rx", "alpha"), lidar=LIDAR,
-                             bounds={"rx": (-1, 1), "alpha": (0.1, 0.6)}, fixed={"ry": 0.3, "rz": 0.2})
+                             bounds={"rx": (-1, 1), "alpha": (0.1, 0.6)}, fixed={"ry": 0.3, "rz": 0.2},
+                             alpha_step=0.05)
     batch = nodes.log_prob(th, meas)
     j = np.floor(np.log(th[:, 1]) / 0.05)
     distinct = {int(k) for jj in j for k in (jj - 1, jj, jj + 1, jj + 2)}

@@ -239,8 +239,15 @@ def test_chain_summary_on_a_known_gaussian():
 
 def test_alpha_interpolation_matches_exact_materials(panels):
     make, data, _, _ = panels
-    interp, exact = make(), make(alpha_step=None)
+    interp, exact = make(alpha_step=0.05), make(alpha_step=None)
     assert interp.alpha_step == 0.05 and exact.alpha_step is None
+    # "auto" (the default): exact for the single-term bus (a build of tens of ms), nodes
+    # for a metal with the double and multiple terms (seconds per build)
+    assert make().alpha_step is None
+    _, _, mesh, inst = panels
+    slow = {"bus": "aluminium", "solar_cells": "fused_silica", "panel_back": "white_paint"}
+    assert "multiple" in pprender.materials.get("aluminium").terms
+    assert fit.ForwardModel(mesh, slow, inst, data.bin_edges, ("rx", "alpha"), fitted_parts=["bus"]).alpha_step == 0.05
     node = np.exp(round(np.log(0.43) / 0.05) * 0.05)  # a node: the interpolant is the render there
     on = np.array([TRUTH[0], TRUTH[1], node])
     np.testing.assert_allclose(interp.expected(on), exact.expected(on), rtol=1e-12, atol=0)
