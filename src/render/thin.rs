@@ -198,14 +198,8 @@ impl ThinPixels {
             if !is_thin(a, rot, lay.pix) {
                 continue;
             }
-            let uv = mesh.faces[t].map(|k| {
-                let p = vertices[k as usize];
-                [(p[0] + lay.ext) / lay.pix, (lay.ext - p[1]) / lay.pix]
-            });
-            let den = (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
-                - (uv[1][1] - uv[0][1]) * (uv[2][0] - uv[0][0]);
-            // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
-            if !den.is_finite() || den == 0.0 || (mesh.face_closed[t] && den > 0.0) {
+            let uv = face_uv(mesh, vertices, lay, t);
+            if !is_front(mesh, t, signed_area(&uv)) {
                 continue;
             }
             // (only where it covers some of the pixel: a pixel it merely touches keeps its
@@ -290,28 +284,11 @@ pub fn gpu_words(chunk: &[ThinPixels], n_pix: usize) -> Vec<u32> {
 /// [`MIN_OVERLAP`].
 fn outline_pairs(mesh: &Mesh, vertices: &[V3], lay: &Layout) -> Vec<(u32, u32)> {
     let w = lay.width;
-    let uvs: Vec<[[f64; 2]; 3]> = mesh
-        .faces
-        .iter()
-        .map(|f| {
-            f.map(|k| {
-                let p = vertices[k as usize];
-                [(p[0] + lay.ext) / lay.pix, (lay.ext - p[1]) / lay.pix]
-            })
-        })
+    let uvs: Vec<[[f64; 2]; 3]> = (0..mesh.faces.len())
+        .map(|t| face_uv(mesh, vertices, lay, t))
         .collect();
-    let den: Vec<f64> = uvs
-        .iter()
-        .map(|uv| {
-            (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
-                - (uv[1][1] - uv[0][1]) * (uv[2][0] - uv[0][0])
-        })
-        .collect();
-    // front faces are counter-clockwise in (x, y), so clockwise in (u, v)
-    let front = |t: usize| {
-        let d = den[t];
-        d.is_finite() && d != 0.0 && !(mesh.face_closed[t] && d > 0.0)
-    };
+    let den: Vec<f64> = uvs.iter().map(signed_area).collect();
+    let front = |t: usize| is_front(mesh, t, den[t]);
     let adj = mesh.adjacency();
     let mut outline = vec![false; w * w];
     let mut any = false;
@@ -345,6 +322,27 @@ fn outline_pairs(mesh: &Mesh, vertices: &[V3], lay: &Layout) -> Vec<(u32, u32)> 
         }
     }
     pairs
+}
+
+/// Face `t`'s corners in pixel coordinates of `lay` (`u` along the columns, `v` down the
+/// rows).
+fn face_uv(mesh: &Mesh, vertices: &[V3], lay: &Layout, t: usize) -> [[f64; 2]; 3] {
+    mesh.faces[t].map(|k| {
+        let p = vertices[k as usize];
+        [(p[0] + lay.ext) / lay.pix, (lay.ext - p[1]) / lay.pix]
+    })
+}
+
+/// Twice the signed area of a triangle in pixel coordinates.
+fn signed_area(uv: &[[f64; 2]; 3]) -> f64 {
+    (uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[1][1] - uv[0][1]) * (uv[2][0] - uv[0][0])
+}
+
+/// Whether face `t` (signed area `den`) is turned toward the receiver as the clipping
+/// takes it: front faces are counter-clockwise in (x, y), so clockwise in (u, v); both
+/// sides of an open mesh's faces.
+fn is_front(mesh: &Mesh, t: usize, den: f64) -> bool {
+    den.is_finite() && den != 0.0 && !(mesh.face_closed[t] && den > 0.0)
 }
 
 /// Every pixel (`row * w + col`) that the triangle `uv` (pixel coordinates) covers by more
