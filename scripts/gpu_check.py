@@ -7,7 +7,8 @@ of ``scripts/gpu_bundle.sh`` (no Rust, no Mitsuba, no registry), or directly::
     python scripts/gpu_check.py [--device gpu|cpu|auto] [--write PATH] [--budget SECONDS]
 
 1. ``pprender.device_info(device)``: the adapter, backend, driver and limits.
-2. Agreement: standard scenes (a smooth rough-aluminium sphere, the default 3U CubeSat with
+2. Agreement: standard scenes (the 3U CubeSat with body panels at analytic coverage, a
+   smooth rough-aluminium sphere, the default 3U CubeSat with
    single + double + multiple scattering, a bistatic tilted plate) rendered by the device
    kernel (``arithmetic="f32"``) and by its f64 CPU twin (``arithmetic="f64"``: the same
    tables, visibility samples and pulse integration in double precision). What differs
@@ -21,6 +22,9 @@ of ``scripts/gpu_bundle.sh`` (no Rust, no Mitsuba, no registry), or directly::
    are graded loosely (ties). Limits are well above what lavapipe measures here
    (docs/gpu-benchmark.md lists both), loose enough for another device's f32
    transcendental functions, tight enough to catch a wrong kernel.
+   Then roll invariance: monostatic single bounce, the body-panel CubeSat's cross-section
+   must not change as it rolls about the line of sight (16 rolls, 48 px, analytic
+   coverage; the device twin of ``test_analytic_coverage_total_is_invariant_under_roll``).
 3. Throughput: realizations (attitudes) per second of the CubeSat at 128x128, for a
    profile-only Stokes request and for the full model (Mueller profile + image + range),
    batch sizes doubling from 1 until two doublings in a row each add less than 10% (the
@@ -73,10 +77,49 @@ def cubesat() -> pprender.Scene:
     return cubesat_scene()
 
 
+#: Sensor settings of the analytic-coverage rows: exact pixel areas of each visible part
+#: (with the outline lists of src/render/thin.rs), 2x2 sub-pixels.
+ANALYTIC: dict[str, Any] = {"coverage": "analytic", "supersampling": 2, "polarization": [1.0, 1.0, 0.0, 0.0]}
+
+
+def body_panels() -> pprender.Scene:
+    """The 3U CubeSat with body-mounted panels of ``tests/test_render.py``'s roll test:
+    single-bounce aluminium bus, glass cells, Lambertian backs."""
+    mesh = models.cubesat("3U", panels="body", antenna=False, detail=1)
+    return pprender.Scene(mesh, {
+        "bus": pprender.Material("beckmann", alpha=0.2, eta=1.38 + 10.2j, terms=["single"]),
+        "solar_cells": pprender.Material("beckmann", alpha=0.05, eta=1.5 + 0j, terms=["single"]),
+        "panel_back": pprender.Material("beckmann", alpha=0.3, eta=1.0 + 0j, terms=["diffuse"], diffuse_albedo=0.8),
+    })
+
+
+#: Largest change of the cross-section (any Stokes component, relative to S0) over the
+#: rolls of ``roll_invariance`` (tests/test_render.py's limit; lavapipe measures <= 5e-5).
+ROLL_LIMIT = 1e-4
+
+
+def roll_invariance(device: str) -> dict[str, Any]:
+    """Monostatic single bounce, the cross-section cannot change as the target rolls about
+    the line of sight; analytic coverage once missed slivers between pixel centres and was
+    8.6% high over 20 degrees of roll (``test_analytic_coverage_total_is_invariant_under_roll``).
+    The device kernel at 48 px, 16 rolls."""
+    from scipy.spatial.transform import Rotation
+
+    roll = np.radians(np.arange(-30.0, 1.0, 2.0))
+    att = (Rotation.from_euler("z", roll[:, None]) * Rotation.from_rotvec([0.5416, 0.3525, -0.4990])).as_matrix()
+    sensor = pprender.Lidar(resolution=48, **ANALYTIC)
+    s = pprender.render(body_panels(), sensor, att, outputs=("profile",), device=device).cross_section
+    err = float(np.abs(s / s[-1, 0] - s[-1] / s[-1, 0]).max())
+    row = {"rolls": len(roll), "error": err, "pass": err <= ROLL_LIMIT}
+    print(f"  {row}", flush=True)
+    return row
+
+
 def scenes() -> list[tuple[str, pprender.Scene, dict[str, Any]]]:
     sphere = pprender.Scene(models.sphere(0.5, 4), materials.get("aluminium", alpha=0.3), smooth=True)
     plate = pprender.Scene(models.plate(0.6, 0.4, detail=2), materials.get("white_paint"))
     return [
+        ("3U CubeSat, body panels, analytic coverage, Stokes (H)", body_panels(), ANALYTIC),
         ("smooth sphere, aluminium alpha 0.3, Mueller", sphere, {}),
         ("3U CubeSat, 4 materials, double bounce, Mueller", cubesat(), {}),
         ("plate, white paint, bistatic 0.2 rad, Stokes (H)", plate,
@@ -248,7 +291,7 @@ def throughput(device: str, budget: float, once: dict[str, float]) -> list[dict[
 
 def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[str, Any]],
            parts: list[dict[str, Any]], scale: list[dict[str, Any]], once: dict[str, float], device: str,
-           seconds: float, paths: list[str] | None = None) -> str:
+           seconds: float, paths: list[str] | None = None, roll: dict[str, Any] | None = None) -> str:
     lines = ["# GPU check", ""]
     if info.get("device_type") == "Cpu":
         lines += [
@@ -273,7 +316,8 @@ def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[s
         "Four random attitudes, 96x96 pixels, one visibility sample per pixel, the balanced tables; "
         "pixels above 1% of the brightest. Limits: total and profile "
         f"{LIMITS['total']:g} (rasterizer ties move them), 99th-percentile pixel error {LIMITS['image_p99']:g}, "
-        f"outlier pixels (error > {OUTLIER:g}) {LIMITS['outliers']:g} of the pixels.",
+        f"outlier pixels (error > {OUTLIER:g}) {LIMITS['outliers']:g} of the pixels. "
+        "The analytic-coverage row takes exact pixel areas (2x2 sub-pixels) instead of samples.",
         "",
         "| scene | total (rel.) | profile (rel. L1) | pixel error, p99 | outlier pixels | pixels | result |",
         "|---|---:|---:|---:|---:|---:|---|",
@@ -281,6 +325,14 @@ def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[s
     for r in agree:
         lines.append(f"| {r['scene']} | {r['total']:.2e} | {r['profile']:.2e} | {r['image_p99']:.2e} | "
                      f"{r['outliers']:.1e} | {r['pixels']} | {'pass' if r['pass'] else '**FAIL**'} |")
+    if roll is not None:
+        lines += [
+            "",
+            f"Roll invariance (`roll_invariance`): the body-panel CubeSat at 48 px, analytic coverage, "
+            f"{roll['rolls']} rolls about the line of sight; the largest change of any Stokes component of the "
+            f"cross-section relative to S0: {roll['error']:.1e} (limit {ROLL_LIMIT:g}): "
+            f"{'pass' if roll['pass'] else '**FAIL**'}.",
+        ]
     lines += [
         "",
         f"## Throughput: 3U CubeSat, {RES}x{RES}, one sample per pixel",
@@ -356,6 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     print("device_info:", info, flush=True)
     print("agreement (f32 device kernel vs f64 CPU twin):", flush=True)
     agree, ok = agreement(a.device)
+    print("roll invariance (analytic coverage):", flush=True)
+    roll = roll_invariance(a.device)
+    ok &= roll["pass"]
     print("throughput:", flush=True)
     speed = throughput(a.device, a.budget, once)
     print("breakdown:", flush=True)
@@ -366,7 +421,7 @@ def main(argv: list[str] | None = None) -> int:
     if not a.quick:
         print("inter-reflections:", flush=True)
         paths = interreflection_rows(a.device, 3)
-    text = report(info, agree, speed, parts, scale, once, a.device, time.perf_counter() - t0, paths)
+    text = report(info, agree, speed, parts, scale, once, a.device, time.perf_counter() - t0, paths, roll)
     print(text)
     if a.write:
         with open(a.write, "w") as f:

@@ -27,7 +27,8 @@ def test_gpu_check_on_lavapipe(tmp_path) -> None:
     assert check.main(["--device", "cpu", "--budget", "1", "--quick", "--write", str(out)]) == 0
     text = out.read_text()
     assert "llvmpipe" in text
-    assert text.count("| pass |") == 3 and "FAIL" not in text
+    assert text.count("| pass |") == 4 and "FAIL" not in text
+    assert "Roll invariance" in text and "(limit 0.0001): pass." in text
     assert "realizations/s" in text
     assert "## Where the time goes: Mueller outputs, batch 4" in text
     assert "| profile + mueller + range |" in text
