@@ -236,7 +236,8 @@ def scaling(device: str, batch: int = SCALING_BATCH) -> list[dict[str, Any]]:
     resolutions, and icospheres of 80 and 20,480 triangles at RES; the best call
     (``_best_call``) with its device time."""
     rough = pprender.Material("beckmann", alpha=0.3, eta=1.5)
-    cases = [(f"3U CubeSat, {r}x{r}", cubesat(), r) for r in (32, 64, 128, 256)]
+    sat = cubesat()  # one scene (its materials take seconds to build on 2 cores)
+    cases = [(f"3U CubeSat, {r}x{r}", sat, r) for r in (32, 64, 128, 256)]
     for k in (1, 5):
         mesh = models.sphere(0.5, k)
         cases.append((f"icosphere, {len(mesh.faces)} triangles, {RES}x{RES}", pprender.Scene(mesh, rough), RES))
@@ -267,7 +268,8 @@ def throughput(device: str, budget: float, once: dict[str, float]) -> list[dict[
     pprender.render(scene, requests[1][1], random_quaternions(1, 0), outputs=requests[1][2], device=device)
     once["first render, shaders compiled (s)"] = time.perf_counter() - t
     rows = []
-    _spin_up(scene, device)
+    if REPEATS > 1:  # (--quick times nothing worth spinning up for)
+        _spin_up(scene, device)
     t_end = time.perf_counter() + budget
     for label, sensor, outputs in requests:
         n, prev, flat = 1, 0.0, 0
@@ -394,8 +396,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--write", default=None, help="write the markdown report here")
     ap.add_argument("--budget", type=float, default=240.0, help="seconds for the throughput sweep")
     ap.add_argument("--quick", action="store_true",
-                    help="batches of 4 in the breakdown and scaling sections (a test that they run)")
+                    help="batches of 4 in the breakdown and scaling sections, one call per measurement and "
+                         "no warm-up (a test that they run, not a measurement)")
     a = ap.parse_args(argv)
+    global REPEATS, WARMUPS
+    REPEATS, WARMUPS = (1, 0) if a.quick else (7, 2)
     t0 = time.perf_counter()
     print(f"pprender {pprender.__version__} from {pprender.__file__}", flush=True)
     t = time.perf_counter()
