@@ -170,6 +170,11 @@ pub struct MaterialSpec {
     pub orders: Orders,
     /// With [`Orders::Surface`]: primary rays per incidence node of each path bank.
     pub bank_rays: u64,
+    /// `Some(h)`: the material's albedo and escape tables are the Catmull-Rom interpolation
+    /// in `ln alpha` of those of the materials at the four nodes `alpha = exp(j h)` about
+    /// it, built once per process and kept ([`Material::new`](super::material::Material::new)
+    /// says what that costs and changes); `None`: built at `alpha` itself (exact).
+    pub alpha_step: Option<f64>,
 }
 
 impl MaterialSpec {
@@ -197,6 +202,7 @@ impl MaterialSpec {
             correlation_length: Self::CORRELATION_LENGTH,
             orders: Orders::Seed,
             bank_rays: Self::BANK_RAYS,
+            alpha_step: None,
         }
     }
 

@@ -45,6 +45,7 @@ mod material_args {
     arg!(correlation_length, real, f64);
     arg!(orders, name, String);
     arg!(bank_rays, count, usize);
+    arg!(alpha_step, opt_real, Option<f64>);
 }
 
 /// A polarized microfacet material.
@@ -54,7 +55,7 @@ mod material_args {
 ///          terms=("single", "multiple"), diffuse_albedo=0.0, name=None,
 ///          double_order=160, coherent_backscatter=True, double_masking="seed",
 ///          wavelength=1.064e-6, correlation_length=1e-5, orders="seed",
-///          bank_rays=4000000)
+///          bank_rays=4000000, alpha_step=None)
 ///
 /// distribution: "blinn_phong" (roughness exponent ``m`` in [0, 1e10]; m = 0 is
 ///     Lambertian-like, m -> inf a mirror), "beckmann" or "ggx" (``alpha`` in
@@ -112,6 +113,14 @@ mod material_args {
 ///     surface's order 2); in the paints it is 4% of the backscatter return at normal
 ///     incidence and 10% at 60 deg, the rest being the diffuse layer.
 /// bank_rays: primary rays per incidence node of each path bank (orders="surface").
+/// alpha_step: None (default) builds the material's albedo and escape tables (those that
+///     normalize the multiple, diffuse and double terms) at ``alpha`` itself. A step h in
+///     (0, 1] interpolates them instead, Catmull-Rom in ln(alpha), from the materials at
+///     the four nodes alpha = exp(j h) about it, which are built once per process and
+///     kept (the 64 most recently used). The single term is always exact. For loops and
+///     fits over alpha with the double or multiple term: the first material in a new
+///     range of alpha costs four builds, later ones milliseconds (docs/material-build.md
+///     measures both, and the interpolation's error against the exact build).
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise
 /// pprender.Error naming the parameter.
@@ -142,12 +151,12 @@ impl PyMaterial {
         double_order=MaterialSpec::DOUBLE_ORDER, coherent_backscatter=true,
         double_masking=String::from("seed"),
         wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH,
-        orders=String::from("seed"), bank_rays=MaterialSpec::BANK_RAYS as usize),
+        orders=String::from("seed"), bank_rays=MaterialSpec::BANK_RAYS as usize, alpha_step=None),
         text_signature = "(distribution='blinn_phong', *, m=None, alpha=None, eta=(1.5+0j), \
 shadowing='aps', correlation=None, smith_g1='exact', masking='table', \
 terms=('single', 'multiple'), diffuse_albedo=0.0, name=None, double_order=160, \
 coherent_backscatter=True, double_masking='seed', wavelength=1.064e-06, \
-correlation_length=1e-05, orders='seed', bank_rays=4000000)")]
+correlation_length=1e-05, orders='seed', bank_rays=4000000, alpha_step=None)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -169,6 +178,7 @@ correlation_length=1e-05, orders='seed', bank_rays=4000000)")]
         #[pyo3(from_py_with = material_args::correlation_length)] correlation_length: f64,
         #[pyo3(from_py_with = material_args::orders)] orders: String,
         #[pyo3(from_py_with = material_args::bank_rays)] bank_rays: usize,
+        #[pyo3(from_py_with = material_args::alpha_step)] alpha_step: Option<f64>,
     ) -> PyResult<Self> {
         let (distribution, shadowing, smith_g1, masking, double_masking) = (
             distribution.as_str(),
@@ -204,6 +214,7 @@ correlation_length=1e-05, orders='seed', bank_rays=4000000)")]
             correlation_length,
             orders: crate::brdf::spec::Orders::from_name(&orders)?,
             bank_rays: bank_rays as u64,
+            alpha_step,
         };
         let inner = py.detach(|| core_brdf::Material::new(spec))?;
         let dist_name = match dist {
@@ -307,6 +318,12 @@ correlation_length=1e-05, orders='seed', bank_rays=4000000)")]
     #[getter]
     fn bank_rays(&self) -> u64 {
         self.inner.spec.bank_rays
+    }
+    /// The step of the alpha nodes the albedo and escape tables are interpolated from
+    /// (None: built at ``alpha`` itself).
+    #[getter]
+    fn alpha_step(&self) -> Option<f64> {
+        self.inner.spec.alpha_step
     }
     #[getter]
     fn correlation_length(&self) -> f64 {

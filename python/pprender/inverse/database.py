@@ -150,6 +150,8 @@ def _material_params(m: Material) -> dict[str, Any]:
         "orders": m.orders,
         "bank_rays": int(m.bank_rays),
     }
+    if m.alpha_step is not None:  # (absent otherwise: databases written before it stay valid)
+        d["alpha_step"] = _num(m.alpha_step)
     if m.distribution == "blinn_phong":
         d["m"] = _num(m.m)  # type: ignore[arg-type]
     else:
@@ -160,7 +162,7 @@ def _material_params(m: Material) -> dict[str, Any]:
 def _material_from_params(d: Mapping[str, Any]) -> Material:
     kw = dict(d)
     kw["eta"] = complex(float(kw["eta"][0]), float(kw["eta"][1]))
-    for k in ("m", "alpha", "diffuse_albedo", "wavelength", "correlation_length"):
+    for k in ("m", "alpha", "diffuse_albedo", "wavelength", "correlation_length", "alpha_step"):
         if k in kw:
             kw[k] = float(kw[k])
     return Material(**kw)

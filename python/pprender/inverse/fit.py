@@ -302,6 +302,7 @@ def _material_with(m: Material, alpha: float | None, eta: complex | None) -> Mat
         correlation_length=m.correlation_length,
         orders=m.orders,
         bank_rays=m.bank_rays,
+        alpha_step=m.alpha_step,
     )
     if alpha is not None:
         kw["alpha"] = alpha
