@@ -6,7 +6,7 @@ use super::spec::Orders;
 pub use super::spec::{MaterialSpec, Term, Terms};
 pub use super::surface::Surface;
 use crate::microfacet::distribution::{ALPHA_MAX, ALPHA_MIN};
-use crate::microfacet::masking::ZTable;
+use crate::microfacet::masking::{catmull_rom, ZTable};
 use crate::microfacet::{Distribution, MaskingEval, Shadowing};
 use crate::optics::frames::V3;
 use crate::optics::fresnel::{average_reflectance, Eta};
@@ -672,15 +672,14 @@ fn average_over_cosine(n: usize, node: impl Fn(usize) -> f64, g: impl Fn(f64, f6
 }
 
 /// Catmull-Rom weights of the nodes `j - 1 .. j + 2` at `t` in [0, 1) past node `j`
-/// (C1 in `t`, exact for quadratics).
+/// (C1 in `t`, exact for quadratics): the crate's [`catmull_rom`] of each unit vector
+/// (exactly `[0, 1, 0, 0]` at `t = 0`).
 fn catmull_rom_weights(t: f64) -> [f64; 4] {
-    let (t2, t3) = (t * t, t * t * t);
-    [
-        (-t3 + 2.0 * t2 - t) / 2.0,
-        (3.0 * t3 - 5.0 * t2 + 2.0) / 2.0,
-        (-3.0 * t3 + 4.0 * t2 + t) / 2.0,
-        (t3 - t2) / 2.0,
-    ]
+    let unit = |m: usize| [0, 1, 2, 3].map(|k| if k == m { 1.0 } else { 0.0 });
+    [0, 1, 2, 3].map(|m| {
+        let [p0, p1, p2, p3] = unit(m);
+        catmull_rom(p0, p1, p2, p3, t)
+    })
 }
 
 /// Materials at alpha nodes, kept for the process: the [`NODE_CACHE_LEN`] most recently
