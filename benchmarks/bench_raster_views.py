@@ -5,7 +5,9 @@ when a process opens the device), and a fingerprint of the outputs of each, whic
 equal (multiview draws every layer with the same arithmetic).
 
 ``python benchmarks/bench_raster_views.py [--device gpu|cpu|auto] [--rounds 2] [--batches 64 256 2048]
-[--resolution 128]`` (the fingerprint renders use half the resolution).
+[--resolution 128] [--terms single double multiple]`` (the fingerprint renders use half the
+resolution; ``--terms`` are the aluminium parts' BRDF terms, ``single`` for a quick test that
+it runs).
 
 On lavapipe (6 views) the passes are cheap and the rates close; on an NVIDIA H200 (31
 views, 2026-11-26) the profile-only rates went from 13,200-14,800 to 20,900-22,200/s at
@@ -24,14 +26,14 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def child(device: str, batches: list[int], resolution: int) -> dict:
+def child(device: str, batches: list[int], resolution: int, terms: tuple[str, ...]) -> dict:
     """In a fresh process: the view count, the outputs' fingerprint and the rates."""
     import numpy as np
 
     import pprender
     from bench_render import best_time, cubesat_scene, random_quaternions
 
-    scene = cubesat_scene()
+    scene = cubesat_scene(terms)
     h = hashlib.sha256()
     q = random_quaternions(37, seed=9)
     small = max(8, resolution // 2)
@@ -65,11 +67,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--batches", type=int, nargs="+", default=[64, 256, 2048])
     ap.add_argument("--resolution", type=int, default=128, help="pixels a side of the timed renders")
+    ap.add_argument("--terms", nargs="+", default=["single", "double", "multiple"],
+                    help="BRDF terms of the aluminium bus and antenna")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.child:
         sys.path.insert(0, HERE)
-        print(json.dumps(child(a.device, a.batches, a.resolution)))
+        print(json.dumps(child(a.device, a.batches, a.resolution, tuple(a.terms))))
         return 0
     runs = []
     for _ in range(a.rounds):
@@ -78,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
             if views is not None:
                 env["PPRENDER_RASTER_VIEWS"] = views
             cmd = [sys.executable, os.path.abspath(__file__), "--child", "--device", a.device,
-                   "--resolution", str(a.resolution), "--batches", *map(str, a.batches)]
+                   "--resolution", str(a.resolution), "--batches", *map(str, a.batches), "--terms", *a.terms]
             out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
             runs.append(json.loads(out.strip().splitlines()[-1]))
     hashes = {r["hash"] for r in runs}

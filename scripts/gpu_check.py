@@ -50,6 +50,7 @@ Exit status 1 if any agreement check fails, 2 if the requested device is missing
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import platform
 import sys
@@ -71,9 +72,11 @@ OUTLIER = 1e-2
 RES = 128
 
 
+@functools.cache
 def cubesat() -> pprender.Scene:
     """The render benchmark's 3U CubeSat (``benchmarks/bench_render.py``): aluminium bus and
-    antenna with single + double + multiple scattering, glass-covered cells, white paint."""
+    antenna with single + double + multiple scattering, glass-covered cells, white paint.
+    One scene for the whole check: its materials take seconds to build on 2 cores."""
     return cubesat_scene()
 
 
@@ -236,7 +239,7 @@ def scaling(device: str, batch: int = SCALING_BATCH) -> list[dict[str, Any]]:
     resolutions, and icospheres of 80 and 20,480 triangles at RES; the best call
     (``_best_call``) with its device time."""
     rough = pprender.Material("beckmann", alpha=0.3, eta=1.5)
-    sat = cubesat()  # one scene (its materials take seconds to build on 2 cores)
+    sat = cubesat()
     cases = [(f"3U CubeSat, {r}x{r}", sat, r) for r in (32, 64, 128, 256)]
     for k in (1, 5):
         mesh = models.sphere(0.5, k)
