@@ -39,8 +39,12 @@ impl Surface {
         if (surf.spec.shadowing == Shadowing::Aps || surf.smith_is_aps())
             && (surf.spec.masking == MaskingEval::Table || (exact && needs_albedo))
         {
+            // Beckmann and GGX tabulate their closed form (equal to the quadrature to
+            // 1e-15, 512 evaluations in microseconds instead of 18 ms of quadratures).
             surf.n_table = Some(ZTable::build(dist.table_scale(), TABLE_NODES, |t| {
-                masking::aps_excess(&dist, t)
+                let (s, c) = t.sin_cos();
+                masking::aps_excess_closed_form(&dist, c, s)
+                    .unwrap_or_else(|| masking::aps_excess(&dist, t))
             }));
         }
         surf

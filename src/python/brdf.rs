@@ -75,8 +75,10 @@ mod material_args {
 ///     with alpha = sqrt(2/(m+2)), which is not energy conserving below m ~ 20
 ///     (white-furnace albedo 1.34 at grazing for m = 0).
 /// masking: how the APS masking integral is evaluated: "table" (per-material cubic
-///     table, error below 1e-8), "exact" (quadrature at each call) or "seed" (the seed's
-///     closed form, Blinn-Phong only; error in docs/seed-approximation.md).
+///     table, error below 1e-8; for Beckmann and GGX it tabulates their closed form,
+///     Smith's cos(theta) Lambda, equal to the integral), "exact" (quadrature at each
+///     call) or "seed" (the seed's closed form, Blinn-Phong only; error in
+///     docs/seed-approximation.md).
 /// terms: a sequence of any of "single", "double" (two facet reflections,
 ///     src/brdf/double.rs), "multiple" (energy-conserving depolarizing multiple
 ///     scattering: what single and double do not reflect), "diffuse" (Lambertian
