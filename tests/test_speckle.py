@@ -283,9 +283,45 @@ def test_log_pmf_large_counts_and_edge_cases() -> None:
     assert float(sp.speckle_log_pmf(k, s, b, m)) == pytest.approx(ref, rel=1e-9)
     big = sp.speckle_log_pmf(np.array([10**9, 0, 10**12]), np.array([1e9, 1e9, 1e12]), 1e3, np.array([1.0, 7.0, 1e15]))
     assert np.all(np.isfinite(big))
+    # deep fades: counts far below a huge mean (no cancellation against the Poisson term)
+    for k, s, m in ((1, 1e18, 2.0), (3, 1e15, 1.0), (0, 1e12, 50.0)):
+        assert float(sp.speckle_log_pmf(k, s, 0.0, m)) == pytest.approx(stats.nbinom.logpmf(k, m, m / (m + s)),
+                                                                        rel=1e-12)
     # impossible data: counts with no signal nor background
     assert sp.speckle_log_pmf(3, 0.0, 0.0, 2.0) == -math.inf
     assert sp.speckle_log_pmf(0, 0.0, 0.0, 2.0) == 0.0
+
+
+def test_fisher_weight() -> None:
+    s = np.array([0.3, 3.0, 40.0])
+    # negative binomial (no background): M / (s (M + s)); Poisson without speckle
+    np.testing.assert_allclose(sp.fisher_weight(s, 0.0, 2.5), 2.5 / (s * (2.5 + s)), rtol=1e-14)
+    np.testing.assert_allclose(sp.fisher_weight(s, 1e-12, 2.5, exact=True), 2.5 / (s * (2.5 + s)), rtol=1e-8)
+    np.testing.assert_allclose(sp.fisher_weight(s, 2.0, math.inf, exact=True), 1 / (s + 2.0), rtol=1e-14)
+    # with background: E[(d log P / ds)^2] by central differences of the log-pmf, and the
+    # Cramer-Rao bound 1 / var below it
+    for si, b, m in ((1.0, 10.0, 1.0), (10.0, 3.0, 2.5), (10.0, 100.0, 1.0)):
+        k = np.arange(0, 2000)
+        h = 1e-5 * si
+        d = (sp.speckle_log_pmf(k, si + h, b, m) - sp.speckle_log_pmf(k, si - h, b, m)) / (2 * h)
+        ref = np.sum(np.exp(sp.speckle_log_pmf(k, si, b, m)) * d * d)
+        got = float(sp.fisher_weight(si, b, m, exact=True))
+        assert got == pytest.approx(ref, rel=1e-6)
+        assert got >= float(sp.fisher_weight(si, b, m)) == pytest.approx(1 / (si + b + si * si / m))
+
+
+def test_blurred_dof() -> None:
+    s = np.array([[10.0, 4.0], [10.0, 0.0], [5.0, 2.0]])  # (B = 3, C = 2)
+    m = np.array([[2.0, 3.0], [2.0, 3.0], [4.0, math.inf]])
+    np.testing.assert_array_equal(sp.blurred_dof(np.eye(3), s, m)[:, 0], m[:, 0])
+    # two independent gammas of equal mean and shape add to shape 2 M (exactly a gamma)
+    out = sp.blurred_dof([[1.0, 1.0, 0.0]], s, m)
+    assert out[0, 0] == pytest.approx(4.0) and out[0, 1] == pytest.approx(3.0)
+    # moment matching: M_out = mean^2 / var, var = sum K^2 s^2 / M
+    k = np.array([[0.2, 0.5, 0.3]])
+    ref = (k @ s[:, 0]) ** 2 / (k**2 @ (s[:, 0] ** 2 / m[:, 0]))
+    assert sp.blurred_dof(k, s, m)[0, 0] == pytest.approx(ref[0], rel=1e-14)
+    assert sp.blurred_dof([[0.0, 1.0, 1.0]], s, m)[0, 1] == math.inf  # no speckle variance
 
 
 # ---------------------------------------------------------------------- errors
@@ -324,6 +360,10 @@ G1 = np.zeros(6, dtype=int)
         (lambda: sp.speckle_log_likelihood(np.ones((2, 3), int), np.ones(4), 0.0, 2.0), "counts/signal"),
         (lambda: sp.generator_groups([[1.0, 0, 0]]), "generators"),
         (lambda: sp.received_stokes(np.ones((2, 4, 3)), np.ones((1, 4))), "mueller"),
+        (lambda: sp.fisher_weight(0.0, 1.0, 2.0), "signal"),
+        (lambda: sp.fisher_weight(1.0, 1.0, 0.5), "dof"),
+        (lambda: sp.blurred_dof(-np.eye(2), np.ones((2, 1)), 2.0), "kernel"),
+        (lambda: sp.blurred_dof(np.eye(2), np.ones((3, 1)), 2.0), "signal"),
     ],
 )
 def test_bad_input_names_the_parameter(call, name) -> None:
