@@ -79,11 +79,12 @@ def random_phasor(
     rho = sunflower(n_aperture, aperture_diameter)
     phase = np.exp(-2j * math.pi * (rho @ xi.T) / (wavelength * target_range))  # (P, N)
     cov = phase @ phase.conj().T / n_scatterers
-    m_exact = float(np.trace(cov).real ** 2 / np.sum(np.abs(cov) ** 2))
+    m_exact = float(np.trace(cov).real ** 2 / np.sum(np.abs(cov) ** 2))  # (tr C)^2 / tr(C^2)
     # the integrated intensity of one polarization is sum_i l_i |z_i|^2 (l_i the
-    # eigenvalues of C): its exact skewness, against the gamma law's 2 / sqrt(M)
-    lam = np.clip(np.linalg.eigvalsh(cov), 0.0, None)
-    skew_exact = float(2.0 * np.sum(lam**3) / np.sum(lam**2) ** 1.5)
+    # eigenvalues of C): its exact skewness 2 tr(C^3) / tr(C^2)^(3/2), against the gamma
+    # law's 2 / sqrt(M)
+    c2 = float(np.sum(np.abs(cov) ** 2))
+    skew_exact = float(2.0 * np.einsum("ij,ji->", cov @ cov, cov).real / c2**1.5)
     s0, s1, s2, s3 = (float(x) for x in stokes)
     # coherency from the Stokes definitions (V = 2 Im(Ex Ey*)), written independently of the module
     j = 0.5 * np.array([[s0 + s1, s2 + 1j * s3], [s2 - 1j * s3, s0 - s1]])

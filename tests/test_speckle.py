@@ -324,6 +324,42 @@ def test_blurred_dof() -> None:
     assert sp.blurred_dof([[0.0, 1.0, 1.0]], s, m)[0, 1] == math.inf  # no speckle variance
 
 
+def test_with_an_instrument_as_measure_would_call_it(rng) -> None:
+    """The integration path: an Instrument's Mueller polarimeter, a Mueller profile in
+    counts per generator, per-bin dof accumulated over each generator's pulses. The
+    speckle-free intensities are expected_counts' signal; the sampled counts average to
+    expected_counts with the background, within 5 standard errors (count_moments)."""
+    from pprender.inverse.instrument import Instrument, expected_counts
+
+    inst = Instrument(pulse_energy=0.1, target_range=1e6, channels="mueller", n_pulses=40, background_rate=2e9)
+    ch = inst.channels
+    edges = np.array([0.0, 0.1, 0.2, 0.3])
+    # per bin: half mirror, half ideal depolarizer (physical: a convex combination)
+    profile = np.array([0.3, 1.0, 0.1])[:, None, None] * np.diag([1.0, 0.5, -0.5, -0.5])
+    signal = expected_counts(profile, inst, bin_edges=edges, background=False)
+    bg = inst.background_counts(edges)
+    unique, gi = sp.generator_groups(ch.generators_array)
+    stokes = sp.received_stokes(profile * inst.counts_per_cross_section, unique)  # (B, G, 4)
+    np.testing.assert_allclose(sp.sample_intensity(stokes, ch.rows, gi, math.inf, rng), signal, rtol=1e-12)
+    m_pulse = sp.speckle_dof(inst.aperture_diameter, inst.wavelength, inst.target_range, [0.01, 0.5, 0.05])
+    share = np.array([ch.pulse_share[list(gi).index(g)] for g in range(len(unique))])
+    dof = sp.accumulated_dof(m_pulse[:, None], inst.n_pulses * share[None, :], 0.5)  # (B, G)
+    n = 20_000
+    k = sp.sample_counts(np.broadcast_to(stokes, (n,) + stokes.shape), ch.rows, gi, dof, bg, rng)
+    mean, cov = sp.count_moments(stokes, ch.rows, gi, dof, bg)
+    np.testing.assert_allclose(mean, signal + bg, rtol=1e-12)
+    var = np.diagonal(cov, axis1=-2, axis2=-1)
+    assert np.max(signal) > 100 and np.max(var / mean) > 10  # speckle, not shot noise, dominates somewhere
+    se = np.sqrt(var / n)
+    assert np.max(np.abs(k.mean(0) - mean) / se) < 5
+    # variances within 5 of their standard errors (sqrt((kurtosis - 1) / n), kurtosis <= 9)
+    assert np.max(np.abs(k.var(0) / var - 1)) < 5 * math.sqrt(8 / n)
+    # the likelihood's per-channel dof; inf gives Poisson
+    m_c = sp.channel_dof(stokes, ch.rows, gi, dof)
+    np.testing.assert_allclose(m_c, dof[:, gi], rtol=1e-12)  # ideal polarizers
+    assert np.isfinite(sp.speckle_log_likelihood(k[:5], signal, bg, m_c)).all()
+
+
 # ---------------------------------------------------------------------- errors
 
 S1 = STOKES[None, None]
