@@ -148,6 +148,20 @@ def test_generators_are_independent_pulses(rng) -> None:
     assert np.all(cov[0][other] == 0)
 
 
+def test_polarized_returns_and_mixed_dof(rng) -> None:
+    # a fully polarized (singular J) return: the orthogonal analyzer never sees light, the
+    # parallel one is gamma with shape M; bins with dof = inf give the mean exactly
+    s = np.array([[[50.0, 50.0, 0, 0]], [[20.0, 0, 0, -20.0]], [[30.0, 0, 0, 0]]])  # (B=3, G=1, 4)
+    dof = np.array([[1.5], [math.inf], [4.0]])
+    i = sp.sample_intensity(np.broadcast_to(s, (20_000,) + s.shape), SIX.rows, np.zeros(6, int), dof, rng)
+    assert np.all(i[:, 0, 1] == 0.0) and np.all(i[:, 0, 0] > 0)
+    np.testing.assert_allclose(i[:, 1, :], np.broadcast_to(SIX.rows @ s[1, 0], (20_000, 6)), rtol=1e-12)
+    for b, m in ((0, 1.5), (2, 4.0)):
+        x = i[:, b, 0] / (SIX.rows[0] @ s[b, 0])
+        # Kolmogorov-Smirnov against the gamma law of shape M, mean 1
+        assert stats.kstest(x, stats.gamma(m, scale=1 / m).cdf).pvalue > 1e-3
+
+
 def test_no_speckle_is_todays_poisson_draw() -> None:
     lam = SIX.rows @ STOKES
     got = sp.sample_counts(STOKES[None, None], SIX.rows, np.zeros(6, int), math.inf, 0.5,
