@@ -66,14 +66,17 @@ replaces the Poisson ``1 / lambda`` of a Fisher information.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import gammaln, j1, xlogy
+from scipy.special import erf, gammaln, j1, xlogy
 
 from .._core import Error
+from ..lidar import SPEED_OF_LIGHT, RenderResult
 
 __all__ = [
+    "Speckle",
     "accumulated_dof",
     "analyzer_matrix",
     "blurred_dof",
@@ -82,6 +85,7 @@ __all__ = [
     "count_moments",
     "fisher_weight",
     "generator_groups",
+    "illuminated_area",
     "intensity_moments",
     "received_stokes",
     "sample_counts",
@@ -1136,3 +1140,287 @@ def speckle_log_likelihood(counts: Any, signal: Any, background: Any, dof: Any) 
         raise Error(f"invalid counts: shape {np.shape(counts)}, expected (..., B, C)")
     out = np.sum(speckle_log_pmf(counts, signal, background, dof), axis=(-2, -1))
     return float(out) if np.ndim(out) == 0 else out
+
+
+
+# ---------------------------------------------------------------------- the instrument's option
+
+
+def _real(value: Any, name: str, what: str) -> float:
+    """A real scalar (not bool, text, None or complex) as float; :class:`Error` naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise Error(f"invalid {name} = {value!r}: {what}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class Speckle:
+    """Laser speckle in an :class:`~pprender.inverse.instrument.Instrument`'s measurements.
+
+    ``Instrument(..., speckle=Speckle(...))`` makes :func:`~pprender.inverse.instrument.measure`
+    draw speckled counts (module docstring: one Wishart coherency per range bin and
+    transmitted state, accumulated over the pulses) and :mod:`pprender.inverse.fit` use the
+    speckle likelihood. The per-pulse degrees of freedom ``M`` of each range bin come from
+    one of:
+
+    * ``dof``: a fixed ``M`` for every bin (``inf``: no speckle, the Poisson model in
+      distribution, though not the same random draws as ``speckle=None``);
+    * ``target_area``: the illuminated, rough part of the target in each bin (m^2,
+      projected on the plane normal to the line of sight), one value or one per range bin
+      of the profile: ``M = speckle_dof(aperture_diameter, wavelength, target_range,
+      target_area)`` with the instrument's aperture, wavelength and range;
+    * neither (default): the per-bin effective area :func:`illuminated_area` of the
+      :class:`~pprender.RenderResult` given to ``measure``, which must then be rendered
+      with images and ranges, ``outputs=("profile", "mueller", "range")`` (or
+      ``"stokes"`` for a single transmitted state); bins without any seen pixel get no
+      speckle (they have no signal).
+
+    Over the ``n_pulses * pulse_share`` pulses of each transmitted state the degrees of
+    freedom add, with ``correlation`` the pulse-to-pulse correlation
+    (:func:`accumulated_dof`).
+
+    Parameters
+    ----------
+    dof : float, optional
+        Per-pulse degrees of freedom in [1, inf]. Not with ``target_area``.
+    target_area : float or sequence of float, optional
+        Projected illuminated area (m^2, finite, > 0): one value, or one per range bin of
+        the profiles measured (B,). Not with ``dof``.
+    correlation : float, optional
+        Pulse-to-pulse correlation of the speckle in [0, 1] (0, the default: independent
+        pulses; 1: a frozen pattern).
+    pulse_fwhm : float or None, optional
+        Only for the area from the render: the pulse's FWHM (s, in (0, 1e-6]) the result was
+        rendered with (``Lidar.pulse_fwhm``; default 100e-12, the Lidar's default), which
+        spreads each pixel over the range bins its pulse covers (:func:`illuminated_area`).
+        None: each pixel counts in the bin of its range only (bins much wider than the
+        pulse).
+
+    Raises
+    ------
+    pprender.Error
+        For both ``dof`` and ``target_area``, or a value outside the ranges above (naming
+        the parameter).
+    """
+
+    dof: float | None = None
+    target_area: float | tuple[float, ...] | None = None
+    correlation: float = 0.0
+    pulse_fwhm: float | None = 100e-12
+
+    def __post_init__(self) -> None:
+        if self.dof is not None and self.target_area is not None:
+            raise Error(
+                "invalid dof/target_area: give one of them (or neither: the area comes from the render), not both"
+            )
+        if self.dof is not None:
+            d = _real(self.dof, "dof", "degrees of freedom per pulse in [1, inf] (a number)")
+            if not d >= 1:
+                raise Error(f"invalid dof = {self.dof!r}: degrees of freedom per pulse in [1, inf]")
+            object.__setattr__(self, "dof", d)
+        if self.target_area is not None:
+            a = _array(self.target_area, "target_area", "areas in m^2, one or one per range bin")
+            if a.ndim > 1 or a.size == 0 or not np.all(np.isfinite(a)) or np.any(a <= 0):
+                raise Error(
+                    f"invalid target_area = {self.target_area!r}: finite areas > 0 (m^2), one value or a 1-D "
+                    "sequence with one per range bin"
+                )
+            object.__setattr__(self, "target_area", float(a) if a.ndim == 0 else tuple(float(x) for x in a))
+        rho = _real(self.correlation, "correlation", "a correlation coefficient in [0, 1]")
+        if not 0.0 <= rho <= 1.0:
+            raise Error(f"invalid correlation = {self.correlation!r}: a correlation coefficient in [0, 1]")
+        object.__setattr__(self, "correlation", rho)
+        if self.pulse_fwhm is not None:
+            f = _real(self.pulse_fwhm, "pulse_fwhm", "a pulse FWHM in (0, 1e-6] s, or None")
+            if not 0.0 < f <= 1e-6:
+                raise Error(f"invalid pulse_fwhm = {self.pulse_fwhm!r}: a pulse FWHM in (0, 1e-6] s, or None")
+            object.__setattr__(self, "pulse_fwhm", f)
+
+    @property
+    def source(self) -> str:
+        """Where the per-pulse dof come from: ``"dof"``, ``"target_area"`` or ``"render"``."""
+        if self.dof is not None:
+            return "dof"
+        return "target_area" if self.target_area is not None else "render"
+
+    @property
+    def per_bin(self) -> bool:
+        """Whether the per-pulse dof differ from bin to bin (a per-bin ``target_area`` or the
+        render's areas): a fit then takes them from the measurement."""
+        return self.source == "render" or isinstance(self.target_area, tuple)
+
+    def pulse_dof(self, aperture_diameter: float, wavelength: float, target_range: float, area: Any = None) -> Any:
+        """The per-pulse degrees of freedom: ``dof``, or :func:`speckle_dof` of the area.
+
+        Parameters
+        ----------
+        aperture_diameter, wavelength, target_range : float
+            The instrument's (m).
+        area : array_like, optional
+            (..., B) projected areas (m^2, >= 0; 0: no speckle, inf dof) for the render
+            source (:func:`illuminated_area`); ignored otherwise.
+
+        Returns
+        -------
+        float or numpy.ndarray
+            ``M`` in [1, inf]: a float, (B,) for a per-bin ``target_area``, or the shape of
+            ``area``.
+
+        Raises
+        ------
+        pprender.Error
+            For the render source without ``area``, or areas that are not finite and >= 0.
+        """
+        if self.dof is not None:
+            return self.dof
+        if self.target_area is not None:
+            return speckle_dof(aperture_diameter, wavelength, target_range, np.asarray(self.target_area))
+        if area is None:
+            raise Error(
+                "invalid profile: Speckle() takes the illuminated area from the render: pass a RenderResult "
+                'rendered with outputs=("profile", "mueller", "range") (or "stokes" for one transmitted state), '
+                "or give Speckle(target_area=...) or Speckle(dof=...)"
+            )
+        a = _array(area, "area", "projected areas in m^2")
+        if not np.all(np.isfinite(a)) or np.any(a < 0):
+            raise Error("invalid area: finite projected areas >= 0 (m^2)")
+        out = np.full(a.shape, np.inf)
+        seen = a > 0
+        if np.any(seen):
+            out[seen] = speckle_dof(aperture_diameter, wavelength, target_range, a[seen])
+        return out
+
+    def to_params(self) -> dict[str, Any]:
+        """The settings as JSON values (:meth:`from_params` rebuilds an equal Speckle).
+
+        Returns
+        -------
+        dict
+            ``dof``, ``target_area`` (a float, a list or None), ``correlation``, ``pulse_fwhm``.
+        """
+        area = self.target_area
+        return {
+            "dof": self.dof,
+            "target_area": list(area) if isinstance(area, tuple) else area,
+            "correlation": self.correlation,
+            "pulse_fwhm": self.pulse_fwhm,
+        }
+
+    @classmethod
+    def from_params(cls, params: Any) -> "Speckle":
+        """The Speckle of :meth:`to_params`' values.
+
+        Parameters
+        ----------
+        params : mapping
+            As :meth:`to_params` returns.
+
+        Returns
+        -------
+        Speckle
+            The settings.
+
+        Raises
+        ------
+        pprender.Error
+            For values the constructor refuses, or a mapping with other keys.
+        """
+        try:
+            return cls(**dict(params))
+        except TypeError as e:
+            raise Error(f"invalid speckle settings {params!r}: {e}") from None
+
+
+def illuminated_area(result: Any, pulse_fwhm: Any = 100e-12) -> np.ndarray:
+    """Per range bin, the effective projected area of the target that returns light in it.
+
+    From a :class:`~pprender.RenderResult` rendered with images and ranges
+    (``outputs=("profile", "mueller", "range")``, or ``"stokes"``/``"intensity"`` for a
+    transmitted state): pixel ``p`` has the projected area ``a_p = coverage_p
+    pixel_size^2`` (on the plane normal to the line of sight), the cross-section ``I_p``
+    (``S0``: ``M00`` of a Mueller image, the unpolarized transmitter's return) and the
+    range ``r_p``. Its share of range bin ``j`` is ``w_jp``: the fraction of a Gaussian
+    pulse of range FWHM ``c pulse_fwhm / 2`` about ``r_p`` that falls in the bin (with
+    ``pulse_fwhm=None``, 1 for the bin containing ``r_p`` and 0 elsewhere). Bin ``j``'s
+    effective area is
+
+    ``A_j = (sum_p w_jp I_p)^2 / sum_p (w_jp I_p)^2 / a_p``,
+
+    Goodman's effective area ``(int I)^2 / int I^2`` of a non-uniformly bright source
+    (:func:`speckle_dof`): the area of a uniformly bright region when the brightness is
+    uniform (a flat plate seen face-on: its area, in every bin its return reaches), and
+    smaller where a few pixels dominate. The pulse's time integral is not counted as extra
+    degrees of freedom (a target deeper than the pulse has more; :func:`speckle_dof`).
+
+    Parameters
+    ----------
+    result : RenderResult
+        Rendered with ``"range"`` (which also sets ``coverage``) and an image output.
+    pulse_fwhm : float or None, optional
+        The rendering Lidar's ``pulse_fwhm`` (s, in (0, 1e-6]; default 100e-12, the Lidar's
+        default). A Lidar with ``pulse_samples``: the FWHM of the Gaussian of the same
+        variance. None: bin by the pixel's range only.
+
+    Returns
+    -------
+    numpy.ndarray
+        (N, B) areas (m^2) per attitude and range bin; 0 where no seen pixel returns light.
+
+    Raises
+    ------
+    pprender.Error
+        For something that is not a RenderResult, one without ``range``/``coverage`` or
+        without an image output, or a ``pulse_fwhm`` outside (0, 1e-6].
+    """
+    if not isinstance(result, RenderResult):
+        raise Error(f"invalid result of type {type(result).__name__}: expected a pprender.RenderResult")
+    if result.range is None or result.coverage is None:
+        raise Error(
+            'invalid result: no "range" image: render with outputs=("profile", "mueller", "range") to get the '
+            "illuminated area per range bin"
+        )
+    if result.mueller is not None:
+        inten = np.asarray(result.mueller)[..., 0, 0]
+    elif result.stokes is not None:
+        inten = np.asarray(result.stokes)[..., 0]
+    elif result.intensity is not None:
+        inten = np.asarray(result.intensity)
+    else:
+        raise Error(
+            'invalid result: no image output: render with outputs=("profile", "mueller", "range") (or "stokes" / '
+            '"intensity" with a transmitted polarization)'
+        )
+    if pulse_fwhm is not None:
+        f = _real(pulse_fwhm, "pulse_fwhm", "a pulse FWHM in (0, 1e-6] s, or None")
+        if not 0.0 < f <= 1e-6:
+            raise Error(f"invalid pulse_fwhm = {pulse_fwhm!r}: a pulse FWHM in (0, 1e-6] s, or None")
+    edges = np.asarray(result.bin_edges, dtype=np.float64)
+    n_bins = len(edges) - 1
+    cov = np.asarray(result.coverage, dtype=np.float64)
+    rng_img = np.asarray(result.range, dtype=np.float64)
+    inten = np.clip(inten.astype(np.float64), 0.0, None)
+    n = cov.shape[0]
+    out = np.zeros((n, n_bins))
+    pix = float(result.pixel_size) ** 2
+    for i in range(n):
+        seen = (cov[i] > 0) & np.isfinite(rng_img[i]) & (inten[i] > 0)
+        a = cov[i][seen] * pix
+        ip = inten[i][seen]
+        r = rng_img[i][seen]
+        if a.size == 0:
+            continue
+        if pulse_fwhm is None:
+            j = np.searchsorted(edges, r, side="right") - 1
+            inside = (j >= 0) & (j < n_bins)
+            num = np.bincount(j[inside], ip[inside], minlength=n_bins)
+            den = np.bincount(j[inside], ip[inside] ** 2 / a[inside], minlength=n_bins)
+        else:
+            # share of each pixel's Gaussian pulse in each bin: differences of its CDF at the edges
+            sigma = SPEED_OF_LIGHT * float(pulse_fwhm) / 2.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+            cdf = 0.5 * (1.0 + erf((edges[:, None] - r[None, :]) / (sigma * math.sqrt(2.0))))  # (B + 1, P)
+            w = np.diff(cdf, axis=0) * ip[None, :]  # (B, P)
+            num = w.sum(axis=1)
+            den = (w * w / a[None, :]).sum(axis=1)
+        ok = den > 0
+        out[i, ok] = num[ok] ** 2 / den[ok]
+    return out
