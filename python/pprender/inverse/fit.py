@@ -350,7 +350,8 @@ class ForwardModel:
     materials : Material, str, list or mapping
         As for :class:`pprender.Scene` (a mapping needs a model's parts).
     instrument : Instrument
-        The instrument (link budget, channels, jitter, background).
+        The instrument (link budget, channels, jitter, background; with ``speckle``, the
+        speckle likelihood: module docstring, :meth:`log_likelihood`).
     bin_edges : array (B + 1,)
         Range bin edges of the data (m), e.g. ``measurement.bin_edges``; rendered profiles
         are mapped onto them with the instrument's jitter (:func:`expected_counts`).

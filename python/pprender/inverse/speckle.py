@@ -56,6 +56,17 @@ compare it with a directly simulated random-phasor field: the exact law of an ap
 integral is a weighted sum of exponentials, whose skewness exceeds the gamma law's
 ``2 / sqrt(M)`` by up to ~25 % near ``M = 2-4``: the far upper tail is a little heavier).
 
+Range bins: each bin's speckle is an independent draw (different parts of the target).
+That holds for bins at least a pulse length (``c pulse_fwhm / 2``) wide; the renderer's
+default bins are a quarter of it, and neighbouring bins that see the same surface within
+one pulse have correlated speckle, which is left out (sums over such bins, and the jitter
+blur, fluctuate less here than in reality).
+
+In an instrument: :class:`Speckle` is the option of
+:class:`~pprender.inverse.instrument.Instrument` (``speckle=``) that
+:func:`~pprender.inverse.instrument.measure` and :mod:`pprender.inverse.fit` follow;
+:func:`illuminated_area` gives each range bin's effective illuminated area from a render.
+
 Likelihood: :func:`speckle_log_likelihood` multiplies the channels' exact marginal laws
 (a composite likelihood; channels sharing a field are correlated, ``docs/speckle.md``
 measures by how much), :func:`channel_dof` gives each channel's marginal shape,
@@ -1177,7 +1188,8 @@ class Speckle:
 
     Over the ``n_pulses * pulse_share`` pulses of each transmitted state the degrees of
     freedom add, with ``correlation`` the pulse-to-pulse correlation
-    (:func:`accumulated_dof`).
+    (:func:`accumulated_dof`). Range bins are independent draws (module docstring: right
+    for bins at least a pulse length wide).
 
     Parameters
     ----------
