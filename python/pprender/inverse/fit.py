@@ -737,6 +737,22 @@ class ForwardModel:
                 var[rows] = self._speckle_variance(res.profile, res.bin_edges)
         return out, ok, var
 
+    def _speckle_draws(self, theta: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, B, C) speckled counts at one ``theta`` (rendered exactly there), drawn as
+        :func:`~pprender.inverse.instrument.measure` draws them: channels of one
+        transmitted state share a field. Only where the model computes the dof itself."""
+        full = self._full(np.atleast_2d(theta))
+        sc = self.scene(self._key(full[0]))
+        res = _lidar.render(sc, self.lidar, self._rotations(full), outputs=("profile",), device=self.device,
+                            settings=self.settings)
+        assert res.profile is not None
+        p = np.asarray(res.profile[0], dtype=np.float64)
+        stokes, gi, dof = _speckle_state(p, p.shape[-2:] == (4, 4), self.instrument)
+        rows = self.instrument.channels.rows  # type: ignore[union-attr]
+        inten = _speckle.sample_intensity(np.broadcast_to(stokes, (n,) + stokes.shape), rows, gi, dof, rng)
+        k = jitter_matrix(res.bin_edges, self.bin_edges, self.instrument.jitter_range)
+        return rng.poisson(np.einsum("ji,...ic->...jc", k, inten) + self._background)
+
     def _speckle_variance(self, profile: np.ndarray, src_edges: np.ndarray) -> np.ndarray:
         """(n, B, C) speckle variance of each output bin's signal, ``sum_i K_ji^2 s_i^2 /
         M_i`` over the rendered bins ``i`` (``K`` the jitter/rebinning matrix, ``M_i`` each
@@ -1148,12 +1164,14 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
       (parametric bootstrap, 500 Poisson draws at the optimum, seeded with ``seed``);
       a failure means a wrong shape, material or instrument, or a missed global optimum.
       With the instrument's speckle the statistic is Pearson's ``sum (k - lam)^2 / (lam +
-      s^2 / M)`` (each count's speckle variance) and its 500 draws are speckled counts
-      from each count's marginal law (a gamma intensity of shape ``M``, then Poisson with
-      the background), channels drawn independently as the composite likelihood treats
-      them: where channels of one transmitted state share a field and speckle dominates,
-      the real statistic spreads more than these draws, so the p-value can be too small
-      (a false alarm) there;
+      s^2 / M)`` (each count's speckle variance) and its 500 draws are speckled counts at
+      the optimum: drawn as :func:`~pprender.inverse.instrument.measure` draws them (one
+      render at ``x``; channels of one transmitted state share a field) where the model
+      computes ``M`` (one ``dof`` or one ``target_area``), and from each count's marginal
+      law (a gamma intensity of shape ``M``, then Poisson with the background; channels
+      independent) where ``M`` is the measurement's (per-bin areas): there, where
+      channels of one state share a field and speckle dominates, the real statistic
+      spreads more than these draws and the p-value can be too small (a false alarm);
 
     Not a problem but reported (:attr:`FitResult.alternatives`, and a
     :class:`FitWarning`): other optima, more than 3 sd away, whose log-likelihood is within
@@ -1288,9 +1306,9 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
             D = float(_deviance(k, lam))
             sims = _deviance(rng.poisson(lam[None], size=(500,) + lam.shape).astype(np.float64), lam[None])
         else:
-            # speckle: Pearson's statistic with each count's variance lam + s^2 / M, its
-            # draws from each count's marginal law (gamma intensity, then Poisson), the
-            # channels independent as in the composite likelihood
+            # speckle: Pearson's statistic with each count's variance lam + s^2 / M; its
+            # draws speckled as measure() draws them (channels of one state share a field),
+            # or, where the dof are the data's, from each count's marginal law
             bg = model._background
             sig = np.clip(lam - bg, 0.0, None)
             m_c = model.speckle_dof(x, measurement)
@@ -1298,10 +1316,12 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
             var = lam + np.where(finite, sig * sig / np.where(finite, m_c, 1.0), 0.0)
             var = np.where(var > 0, var, 1.0)
             D = float(np.sum((k - lam) ** 2 / var))
-            mf = np.where(finite, m_c, 1.0)
-            g = rng.standard_gamma(np.broadcast_to(mf, (500,) + lam.shape)) / mf
-            inten = np.where(finite, sig * g, sig)
-            draws = rng.poisson(inten + bg).astype(np.float64)
+            if model._speckle_at_theta:
+                draws = model._speckle_draws(x, 500, rng).astype(np.float64)
+            else:
+                mf = np.where(finite, m_c, 1.0)
+                g = rng.standard_gamma(np.broadcast_to(mf, (500,) + lam.shape)) / mf
+                draws = rng.poisson(np.where(finite, sig * g, sig) + bg).astype(np.float64)
             sims = np.sum((draws - lam) ** 2 / var, axis=(-2, -1))
         above = int(np.sum(sims >= D))
         # beyond the draws, the tail of a normal fitted to them (the deviance of many bins
