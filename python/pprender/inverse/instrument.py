@@ -1243,6 +1243,12 @@ def measure(
             s_src = np.clip(np.einsum("ci,...ci->...c", rows, stokes[..., gi, :]), 0.0, None)
             dof_c = _speckle.blurred_dof(k, s_src, dof_c)
             inten = np.einsum("ji,...ic->...jc", k, inten)
+        top = float(np.max(inten + bg, initial=0.0))
+        if not top <= _POISSON_MAX:
+            raise Error(
+                f"invalid profile/instrument: a speckle intensity of {top:.3g} counts in a bin, more than the largest "
+                f"Poisson mean that can be drawn ({_POISSON_MAX:.3g}, int64 counts); lower the pulse energy"
+            )
         counts = rng.poisson(inten + bg).astype(np.int64)
     return Measurement(
         counts=counts,
