@@ -192,6 +192,13 @@ def test_measure_takes_the_area_from_the_render(plates) -> None:
     np.testing.assert_allclose(m.speckle_dof, np.repeat(2 * pulse[..., None], 2, axis=-1), rtol=1e-12)
     seen = sp.illuminated_area(res) > 0
     assert np.all(np.isfinite(m.speckle_dof[seen])) and np.all(np.isinf(m.speckle_dof[~seen]))
+    # a Stokes render (one transmitted state) gives the same areas from its S0 image
+    lid = pprender.Lidar(resolution=64, supersampling=2, bin_width=0.1, polarization=inst.channels.transmit)
+    st = pprender.render(pprender.Scene(models.plate(1.0, 0.5, thickness=1e-4), lambertian()), lid, np.eye(3)[None],
+                         outputs=("profile", "stokes", "range"))
+    np.testing.assert_allclose(sp.illuminated_area(st)[0], sp.illuminated_area(res)[0], rtol=1e-5, atol=1e-12)
+    ms = ins.measure(st, inst, seed=0)
+    np.testing.assert_allclose(ms.speckle_dof[0], m.speckle_dof[0], rtol=1e-5)
     # a profile without images, or an array, cannot give the area: the error says what to do
     bare = pprender.RenderResult(cross_section=res.cross_section, bin_edges=res.bin_edges,
                                  pixel_size=res.pixel_size, extent=res.extent, device="", profile=res.profile)
