@@ -39,6 +39,7 @@ MODULES = [
     "pprender.inverse.classify",
     "pprender.inverse.fit",
     "pprender.inverse.so3",
+    "pprender.inverse.speckle",
     "pprender.mesh",
     "pprender.materials",
     "pprender.models",

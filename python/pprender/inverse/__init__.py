@@ -6,6 +6,8 @@
   in a resumable Zarr store; :mod:`~pprender.inverse.distributed` builds them on Dask;
 * :mod:`~pprender.inverse.so3`: rotation grids and distances;
 * :mod:`~pprender.inverse.classify`: the vector classifier;
+* :mod:`~pprender.inverse.speckle`: laser speckle statistics (degrees of freedom, Wishart
+  sampling of correlated channels, the negative binomial likelihood);
 * :mod:`~pprender.inverse.fit`: likelihood, nlopt and emcee fits (imported on first use:
   it loads scipy's spatial module).
 
@@ -15,9 +17,9 @@ which are the same module objects.
 
 from __future__ import annotations
 
-from . import classify, database, distributed, instrument, so3
+from . import classify, database, distributed, instrument, so3, speckle
 
-__all__ = ["classify", "database", "distributed", "fit", "instrument", "so3"]
+__all__ = ["classify", "database", "distributed", "fit", "instrument", "so3", "speckle"]
 
 
 def __getattr__(name: str) -> object:

@@ -35,6 +35,19 @@ Conventions (written once here):
   give ``-inf``: :meth:`ForwardModel.log_prob` never raises for a parameter value.
 * Likelihood: independent Poisson counts in every range bin and channel,
   ``log L = sum_bc [k log(lam) - lam - log(k!)]`` (:func:`poisson_log_likelihood`).
+  With an instrument's :class:`~pprender.inverse.speckle.Speckle`: each count's exact
+  marginal law, a negative binomial (Poisson over a gamma speckle intensity of shape
+  ``M``, each count's marginal dof) convolved with the Poisson background
+  (:func:`pprender.inverse.speckle.speckle_log_likelihood`), multiplied over bins and
+  channels. That is a composite likelihood: channels of one transmitted state see one
+  speckle field and are correlated; the estimates stay consistent, but where speckle
+  dominates the noise the Fisher information (:func:`fisher_information`) overstates
+  what the data say (``docs/speckle.md``: sd too small by up to 1.4x for co/cross
+  channels, 2.2x for the six-channel polarimeter, 1 for an unpolarized return on
+  co/cross). ``M`` is computed at each ``theta`` (one ``dof`` or one ``target_area``:
+  :meth:`ForwardModel.speckle_dof`) or taken from the measurement (per-bin areas) and
+  held fixed in the derivatives. ``M = inf`` everywhere is the Poisson likelihood, bit
+  for bit.
 * Attitudes (``reference_attitude``, :func:`attitude_error`): rotation matrices
   ``(..., 3, 3)`` (body to telescope), quaternions ``(..., 4)`` in pprender's scalar-first
   order ``(w, x, y, z)``, or :class:`scipy.spatial.transform.Rotation` objects (converted
@@ -68,7 +81,18 @@ from scipy.spatial.transform import Rotation
 from .. import lidar as _lidar
 from .. import _core
 from .._core import Error, Material
-from .instrument import Instrument, Measurement, _check_edges, _check_number, _numeric_array, expected_counts
+from . import speckle as _speckle
+from .instrument import (
+    Instrument,
+    Measurement,
+    _channel_cross_sections,
+    _check_edges,
+    _check_number,
+    _numeric_array,
+    _speckle_state,
+    expected_counts,
+    jitter_matrix,
+)
 
 __all__ = [
     "DEFAULT_BOUNDS",
@@ -326,7 +350,8 @@ class ForwardModel:
     materials : Material, str, list or mapping
         As for :class:`pprender.Scene` (a mapping needs a model's parts).
     instrument : Instrument
-        The instrument (link budget, channels, jitter, background).
+        The instrument (link budget, channels, jitter, background; with ``speckle``, the
+        speckle likelihood: module docstring, :meth:`log_likelihood`).
     bin_edges : array (B + 1,)
         Range bin edges of the data (m), e.g. ``measurement.bin_edges``; rendered profiles
         are mapped onto them with the instrument's jitter (:func:`expected_counts`).
@@ -542,6 +567,10 @@ class ForwardModel:
         for name, v in self.fixed.items():
             self._base[self._index[name]] = v
         self._free_idx = np.array([self._index[n] for n in free])
+        # speckle: the background counts on the data's bins; whether the model computes each
+        # count's dof at theta (one dof or one area) or takes them from the data (per bin)
+        self._background = instrument.background_counts(self.bin_edges)
+        self._speckle_at_theta = instrument.speckle is not None and not instrument.speckle.per_bin
 
     # -------------------------------------------------------------- basics
 
@@ -631,11 +660,13 @@ class ForwardModel:
 
     # -------------------------------------------------------------- expected counts
 
-    def _expected_full(self, full: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Expected counts (n, B, C) and validity (n,) for full parameter rows; invalid
-        rows (no material can be built, non-finite results) are NaN. With ``alpha_step``,
-        rows with a free ``alpha`` are the Catmull-Rom interpolation of the renders at the
-        four alpha nodes about it (class docstring)."""
+    def _expected_full(self, full: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Expected counts (n, B, C), validity (n,) and, with speckle whose dof the model
+        computes, the speckle variance of each bin's signal (n, B, C; else None) for full
+        parameter rows; invalid rows (no material can be built, non-finite results) are
+        NaN. With ``alpha_step``, rows with a free ``alpha`` are the Catmull-Rom
+        interpolation of the renders at the four alpha nodes about it (class docstring),
+        the speckle variance with the same weights."""
         n = len(full)
         if self.alpha_step is None:
             return self._rendered(full)
@@ -654,27 +685,35 @@ class ForwardModel:
             rows.append(node[keep])
             weights.append(w[keep, m])
             src.append(np.flatnonzero(keep))
-        lam_all, ok_all = self._rendered(np.concatenate(rows))
+        lam_all, ok_all, var_all = self._rendered(np.concatenate(rows))
         out = np.zeros((n, len(self.bin_edges) - 1, len(self.channel_names)))
+        var = None if var_all is None else np.zeros_like(out)
         ok = np.isfinite(u)
         at = 0
         for m in range(4):
             k = len(src[m])
-            out[src[m]] += weights[m][:, None, None] * np.where(ok_all[at:at + k, None, None], lam_all[at:at + k], 0.0)
+            good = ok_all[at:at + k, None, None]
+            out[src[m]] += weights[m][:, None, None] * np.where(good, lam_all[at:at + k], 0.0)
+            if var is not None and var_all is not None:
+                var[src[m]] += weights[m][:, None, None] * np.where(good, var_all[at:at + k], 0.0)
             ok[src[m][~ok_all[at:at + k]]] = False
             at += k
         # the interpolant may dip below zero between nodes where a bin is ~0: counts >= 0
         out = np.maximum(out, 0.0)
         out[~ok] = np.nan
-        return out, ok
+        if var is not None:
+            var = np.maximum(var, 0.0)
+        return out, ok, var
 
-    def _rendered(self, full: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Expected counts rendered at exactly these parameter rows."""
+    def _rendered(self, full: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Expected counts rendered at exactly these parameter rows (and the speckle
+        variance, as :meth:`_expected_full`)."""
         n = len(full)
         out = np.full((n, len(self.bin_edges) - 1, len(self.channel_names)), np.nan)
+        var = np.full_like(out, np.nan) if self._speckle_at_theta else None
         ok = np.zeros(n, dtype=bool)
         if n == 0:
-            return out, ok
+            return out, ok, var
         rot = self._rotations(full)
         groups: dict[tuple, list[int]] = {}
         for i in range(n):
@@ -693,7 +732,43 @@ class ForwardModel:
             good = np.all(np.isfinite(lam), axis=(1, 2))
             out[rows] = lam
             ok[rows] = good
-        return out, ok
+            if var is not None:
+                assert res.profile is not None
+                var[rows] = self._speckle_variance(res.profile, res.bin_edges)
+        return out, ok, var
+
+    def _speckle_draws(self, theta: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, B, C) speckled counts at one ``theta`` (rendered exactly there), drawn as
+        :func:`~pprender.inverse.instrument.measure` draws them: channels of one
+        transmitted state share a field. Only where the model computes the dof itself."""
+        full = self._full(np.atleast_2d(theta))
+        sc = self.scene(self._key(full[0]))
+        res = _lidar.render(sc, self.lidar, self._rotations(full), outputs=("profile",), device=self.device,
+                            settings=self.settings)
+        assert res.profile is not None
+        p = np.asarray(res.profile[0], dtype=np.float64)
+        stokes, gi, dof = _speckle_state(p, p.shape[-2:] == (4, 4), self.instrument)
+        rows = self.instrument.channels.rows  # type: ignore[union-attr]
+        inten = _speckle.sample_intensity(np.broadcast_to(stokes, (n,) + stokes.shape), rows, gi, dof, rng)
+        k = jitter_matrix(res.bin_edges, self.bin_edges, self.instrument.jitter_range)
+        return rng.poisson(np.einsum("ji,...ic->...jc", k, inten) + self._background)
+
+    def _speckle_variance(self, profile: np.ndarray, src_edges: np.ndarray) -> np.ndarray:
+        """(n, B, C) speckle variance of each output bin's signal, ``sum_i K_ji^2 s_i^2 /
+        M_i`` over the rendered bins ``i`` (``K`` the jitter/rebinning matrix, ``M_i`` each
+        channel's marginal dof, :func:`~pprender.inverse.speckle.channel_dof`): the
+        denominator of :func:`~pprender.inverse.speckle.blurred_dof`."""
+        inst = self.instrument
+        p = np.asarray(profile, dtype=np.float64)
+        mueller = p.shape[-2:] == (4, 4)
+        _channel_cross_sections(p, mueller, inst.channels)  # type: ignore[arg-type]  # the same checks
+        stokes, gi, dof = _speckle_state(p, mueller, inst)
+        rows = inst.channels.rows  # type: ignore[union-attr]
+        s_src = np.clip(np.einsum("ci,...ci->...c", rows, stokes[..., gi, :]), 0.0, None)
+        m_c = _speckle.channel_dof(stokes, rows, gi, dof)
+        v_src = np.where(np.isinf(m_c), 0.0, s_src * s_src / m_c)
+        k = jitter_matrix(src_edges, self.bin_edges, inst.jitter_range)
+        return np.einsum("ji,...ic->...jc", k * k, v_src)
 
     def expected(self, thetas: Any) -> np.ndarray:
         """Expected counts at ``thetas``: (B, C) for one ``theta`` (ndim,), (n, B, C) for
@@ -702,7 +777,7 @@ class ForwardModel:
         th, single = self._thetas(thetas)
         if not np.all(np.isfinite(self.log_prior(th))):
             raise Error(f"invalid theta: outside the bounds {dict(zip(self.names, self.bounds.tolist()))}")
-        lam, ok = self._expected_full(self._full(th))
+        lam, ok, _ = self._expected_full(self._full(th))
         if not np.all(ok):
             raise Error(f"invalid theta: no valid model at {th[~ok].tolist()} (material parameters out of range)")
         return lam[0] if single else lam
@@ -739,15 +814,105 @@ class ForwardModel:
             )
         return k, gammaln(k + 1.0)
 
+    def _data_dof(self, data: Any) -> np.ndarray | None:
+        """The data's recorded speckle dof (B, C) where the model takes them from the data
+        (a per-bin Speckle, class docstring); None where it computes them itself."""
+        sp = self.instrument.speckle
+        if sp is None or self._speckle_at_theta:
+            return None
+        dof = data.speckle_dof if isinstance(data, Measurement) else None
+        if dof is None:
+            raise Error(
+                f"invalid data: the instrument's Speckle ({sp.source}) has per-bin degrees of freedom, which the "
+                "model takes from the measurement: pass the Measurement that measure() returned (its speckle_dof), "
+                "or use Speckle(dof=...) or a single Speckle(target_area=...)"
+            )
+        dof = np.asarray(dof, dtype=np.float64)
+        shape = (len(self.bin_edges) - 1, len(self.channel_names))
+        if dof.shape != shape:
+            raise Error(f"invalid data: speckle_dof of shape {dof.shape}, expected {shape}; index a batched Measurement first")
+        return dof
+
+    def speckle_dof(self, thetas: Any, data: Any = None) -> np.ndarray:
+        """Each count's marginal speckle degrees of freedom at ``thetas`` (what the likelihood uses).
+
+        ``s^2 / v`` with ``s`` the expected signal and ``v`` its speckle variance through the
+        jitter (:func:`~pprender.inverse.speckle.blurred_dof`) when the instrument's
+        :class:`~pprender.inverse.speckle.Speckle` has one ``dof`` or one ``target_area``;
+        for per-bin areas (or the render's), the data's recorded ``speckle_dof``.
+
+        Parameters
+        ----------
+        thetas : array_like
+            (ndim,) or (n, ndim) parameter values, inside the bounds.
+        data : Measurement, optional
+            Needed for per-bin degrees of freedom.
+
+        Returns
+        -------
+        numpy.ndarray
+            (B, C) or (n, B, C), in [1, inf] (inf: no speckle).
+
+        Raises
+        ------
+        pprender.Error
+            Without speckle, outside the bounds, or without the data where they are needed.
+        """
+        if self.instrument.speckle is None:
+            raise Error("invalid model: its instrument has no speckle (Instrument(speckle=None))")
+        th, single = self._thetas(thetas)
+        if not np.all(np.isfinite(self.log_prior(th))):
+            raise Error(f"invalid theta: outside the bounds {dict(zip(self.names, self.bounds.tolist()))}")
+        lam, ok, var = self._expected_full(self._full(th))
+        if not np.all(ok):
+            raise Error(f"invalid theta: no valid model at {th[~ok].tolist()} (material parameters out of range)")
+        _, m = self._signal_dof(lam, var, self._data_dof(data))
+        return m[0] if single else m
+
+    def _signal_dof(self, lam: np.ndarray, var: np.ndarray | None, dof_data: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Expected signal ``lam - background`` (>= 0) and each count's marginal dof (n, B, C)."""
+        s = np.clip(lam - self._background, 0.0, None)
+        if var is not None:
+            pos = var > 0
+            m = np.where(pos, np.maximum(s * s / np.where(pos, var, 1.0), 1.0), np.inf)
+        else:
+            assert dof_data is not None
+            m = np.broadcast_to(dof_data, s.shape)
+        return s, m
+
+    def _loglik_rows(self, k: np.ndarray, lgk: Any, lam: np.ndarray, ok: np.ndarray, var: np.ndarray | None,
+                     dof_data: np.ndarray | None) -> np.ndarray:
+        """Log-likelihood of the counts for each row of expected counts; -inf where not ok."""
+        lam = np.where(ok[:, None, None], lam, 1.0)
+        if self.instrument.speckle is None:
+            return np.where(ok, _loglik(k, lam, lgk), -np.inf)
+        s, m = self._signal_dof(lam, None if var is None else np.where(ok[:, None, None], var, 0.0), dof_data)
+        if np.all(np.isinf(m)):
+            return np.where(ok, _loglik(k, lam, lgk), -np.inf)  # no speckle anywhere: Poisson, bit for bit
+        ll = _speckle.speckle_log_likelihood(np.broadcast_to(k, s.shape), s, self._background, m)
+        return np.where(ok, ll, -np.inf)
+
     def log_likelihood(self, thetas: Any, data: Any) -> Any:
-        """Poisson log-likelihood of ``data`` (a :class:`Measurement` or counts (B, C)) at
-        ``thetas``; ``-inf`` where the model is invalid. Not bounded by the prior."""
+        """Log-likelihood of ``data`` (a :class:`Measurement` or counts (B, C)) at ``thetas``;
+        ``-inf`` where the model is invalid. Not bounded by the prior.
+
+        Poisson (:func:`poisson_log_likelihood`) without speckle; with the instrument's
+        :class:`~pprender.inverse.speckle.Speckle`, the composite speckle likelihood
+        :func:`~pprender.inverse.speckle.speckle_log_likelihood` (each count's exact
+        marginal law, channels multiplied as if independent; ``docs/speckle.md``: where
+        channels share a field and speckle dominates, its curvature overstates the
+        information by up to 1.4x (co/cross) to 2.2x (six-channel) in variance terms)
+        with the dof of :meth:`speckle_dof`; dof inf everywhere gives the Poisson one bit
+        for bit. Per-bin speckle dof (a per-bin ``target_area`` or the render's areas) are
+        the data's: ``data`` must then be the :class:`Measurement`.
+        """
         th, single = self._thetas(thetas)
         k, lgk = self._counts(data)
+        dof_data = self._data_dof(data)
         out = np.full(len(th), -np.inf)
         fin = np.all(np.isfinite(th), axis=1)
-        lam, ok = self._expected_full(self._full(th[fin]))
-        ll = np.where(ok, _loglik(k, np.where(ok[:, None, None], lam, 1.0), lgk), -np.inf)
+        lam, ok, var = self._expected_full(self._full(th[fin]))
+        ll = self._loglik_rows(k, lgk, lam, ok, var, dof_data)
         out[fin] = ll
         out = np.where(np.isnan(out), -np.inf, out)
         return float(out[0]) if single else out
@@ -762,12 +927,13 @@ class ForwardModel:
         """
         th, single = self._thetas(thetas)
         k, lgk = self._counts(data)
+        dof_data = self._data_dof(data)
         lp = np.asarray(self.log_prior(th), dtype=np.float64).reshape(-1)
         out = np.full(len(th), -np.inf)
         inside = np.isfinite(lp)
         if np.any(inside):
-            lam, ok = self._expected_full(self._full(th[inside]))
-            ll = np.where(ok, _loglik(k, np.where(ok[:, None, None], lam, 1.0), lgk), -np.inf)
+            lam, ok, var = self._expected_full(self._full(th[inside]))
+            ll = self._loglik_rows(k, lgk, lam, ok, var, dof_data)
             out[inside] = lp[inside] + np.where(np.isnan(ll), -np.inf, ll)
         return float(out[0]) if single else out
 
@@ -775,12 +941,23 @@ class ForwardModel:
 # ---------------------------------------------------------------------- Fisher information
 
 
-def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.ndarray:
-    """Fisher information (ndim, ndim) of Poisson counts at ``theta``.
+def fisher_information(model: ForwardModel, theta: Any, step: Any = None, data: Any = None) -> np.ndarray:
+    """Fisher information (ndim, ndim) of Poisson (or speckled) counts at ``theta``.
 
     ``F_ij = sum_bc (d lam / d theta_i)(d lam / d theta_j) / lam``, the derivatives by central
     differences of the rendered expected counts. ``sqrt(diag(inv(F)))`` is the Cramer-Rao
     standard deviation.
+
+    With the instrument's :class:`~pprender.inverse.speckle.Speckle`, ``1 / lam`` is
+    replaced by :func:`~pprender.inverse.speckle.fisher_weight` of each count's signal,
+    background and marginal dof (:meth:`ForwardModel.speckle_dof`; the dof held fixed):
+    the inverse variance ``1 / (lam + s^2 / M)``, a lower bound on each count's
+    information, so the sd are conservative by at most ``sqrt(1.15)``
+    (``docs/speckle.md``). This is the information of the composite (channels
+    independent) likelihood; where channels share a speckle field and speckle dominates,
+    the true spread of the estimates is larger than its ``sqrt(diag(inv(F)))``
+    (``docs/speckle.md``: up to 1.4x for co/cross channels, 2.2x for the six-channel
+    polarimeter, in sd).
 
     Parameters
     ----------
@@ -793,6 +970,9 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.
         bounds). Rendering is rasterized, so ``step`` must be large enough that
         pixel-coverage noise (of order 1e-4 relative at resolution 48 with supersampling 2) is
         small against the change it causes.
+    data : Measurement, optional
+        The measurement whose recorded ``speckle_dof`` a per-bin Speckle needs (ignored
+        otherwise).
 
     Returns
     -------
@@ -827,6 +1007,11 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.
     jac = np.stack([(lam[1 + 2 * i] - lam[2 + 2 * i]) / (2 * h[i]) for i in range(model.ndim)])  # (p, B, C)
     lam0 = lam[0]
     w = np.where(lam0 > 0, 1.0 / np.where(lam0 > 0, lam0, 1.0), 0.0)
+    if model.instrument.speckle is not None:
+        m = model.speckle_dof(th, data)
+        s = np.clip(lam0 - model._background, 0.0, None)
+        pos = s > 0
+        w = np.where(pos, _speckle.fisher_weight(np.where(pos, s, 1.0), model._background, m), w)
     return np.einsum("ibc,jbc,bc->ij", jac, jac, w)
 
 
@@ -876,11 +1061,12 @@ class FitResult:
         Distance (in Cramer-Rao sd, Mahalanobis) from ``x`` to the maximum of the local
         quadratic model of the log-likelihood: small at a converged maximum.
     deviance : float or None
-        ``2 sum [k log(k / lam) - (k - lam)]`` at ``x``.
+        ``2 sum [k log(k / lam) - (k - lam)]`` at ``x``; with speckle, Pearson's
+        ``sum (k - lam)^2 / (lam + s^2 / M)`` (:func:`diagnose_fit`).
     deviance_p : float or None
         Probability of a deviance at least as large under the fitted model (500 Poisson draws
-        of the expected counts at ``x``; beyond the largest draw, the tail of a normal fitted
-        to them): near 0 when the model cannot explain the data.
+        of the expected counts at ``x``, speckled ones with speckle; beyond the largest draw,
+        the tail of a normal fitted to them): near 0 when the model cannot explain the data.
     n_agree : int or None
         Local starts whose optimum is the best one (log-likelihood within 1 and position
         within 3 sd), out of ``len(starts)``.
@@ -976,7 +1162,16 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
     * the local quadratic model's maximum lies within :data:`NEWTON_LIMIT` sd (converged);
     * the model explains the data: deviance p-value above :data:`DEVIANCE_P_LIMIT`
       (parametric bootstrap, 500 Poisson draws at the optimum, seeded with ``seed``);
-      a failure means a wrong shape, material or instrument, or a missed global optimum;
+      a failure means a wrong shape, material or instrument, or a missed global optimum.
+      With the instrument's speckle the statistic is Pearson's ``sum (k - lam)^2 / (lam +
+      s^2 / M)`` (each count's speckle variance) and its 500 draws are speckled counts at
+      the optimum: drawn as :func:`~pprender.inverse.instrument.measure` draws them (one
+      render at ``x``; channels of one transmitted state share a field) where the model
+      computes ``M`` (one ``dof`` or one ``target_area``), and from each count's marginal
+      law (a gamma intensity of shape ``M``, then Poisson with the background; channels
+      independent) where ``M`` is the measurement's (per-bin areas): there, where
+      channels of one state share a field and speckle dominates, the real statistic
+      spreads more than these draws and the p-value can be too small (a false alarm);
 
     Not a problem but reported (:attr:`FitResult.alternatives`, and a
     :class:`FitWarning`): other optima, more than 3 sd away, whose log-likelihood is within
@@ -1022,7 +1217,7 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
     F = None
     if np.all(room > 1e-9 * width):
         try:
-            F = fisher_information(model, x)
+            F = fisher_information(model, x, data=measurement)
             n_eval += 2 * n + 1
         except Error as e:
             problems.append(f"no Fisher information at the optimum: {e}")
@@ -1106,9 +1301,28 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
     lam = model.expected(x) if np.all(np.isfinite(model.log_prior(x))) else None
     n_eval += 1
     if lam is not None:
-        D = float(_deviance(k, lam))
         rng = np.random.default_rng(seed)
-        sims = _deviance(rng.poisson(lam[None], size=(500,) + lam.shape).astype(np.float64), lam[None])
+        if model.instrument.speckle is None:
+            D = float(_deviance(k, lam))
+            sims = _deviance(rng.poisson(lam[None], size=(500,) + lam.shape).astype(np.float64), lam[None])
+        else:
+            # speckle: Pearson's statistic with each count's variance lam + s^2 / M; its
+            # draws speckled as measure() draws them (channels of one state share a field),
+            # or, where the dof are the data's, from each count's marginal law
+            bg = model._background
+            sig = np.clip(lam - bg, 0.0, None)
+            m_c = model.speckle_dof(x, measurement)
+            finite = np.isfinite(m_c)
+            var = lam + np.where(finite, sig * sig / np.where(finite, m_c, 1.0), 0.0)
+            var = np.where(var > 0, var, 1.0)
+            D = float(np.sum((k - lam) ** 2 / var))
+            if model._speckle_at_theta:
+                draws = model._speckle_draws(x, 500, rng).astype(np.float64)
+            else:
+                mf = np.where(finite, m_c, 1.0)
+                g = rng.standard_gamma(np.broadcast_to(mf, (500,) + lam.shape)) / mf
+                draws = rng.poisson(np.where(finite, sig * g, sig) + bg).astype(np.float64)
+            sims = np.sum((draws - lam) ** 2 / var, axis=(-2, -1))
         above = int(np.sum(sims >= D))
         # beyond the draws, the tail of a normal fitted to them (the deviance of many bins
         # is near normal); the empirical p-value cannot go below 1 / 501

@@ -88,6 +88,8 @@ from scipy.special import erfc
 from .. import _io
 from .._core import Error
 from ..lidar import SPEED_OF_LIGHT, RenderResult
+from . import speckle as _speckle
+from .speckle import Speckle
 
 __all__ = [
     "PLANCK",
@@ -393,6 +395,10 @@ class Instrument:
         ``"co_cross_linear"``.
     n_pulses : int, optional
         Number of pulses accumulated, in [1, 1e12]. Default 1.
+    speckle : Speckle or None, optional
+        Laser speckle (:class:`pprender.inverse.speckle.Speckle`): :func:`measure` draws
+        speckled counts and :mod:`pprender.inverse.fit` uses the speckle likelihood. Default
+        None: no speckle, Poisson counts (today's model, the same draws bit for bit).
 
     Raises
     ------
@@ -412,6 +418,7 @@ class Instrument:
     background_rate: float | Sequence[float] = 0.0
     channels: str | Channels = "co_cross_linear"
     n_pulses: int = 1
+    speckle: Speckle | None = None
 
     def __post_init__(self) -> None:
         _check_number("pulse_energy", self.pulse_energy, 0.0, 1e3, True, False, "J")
@@ -444,6 +451,11 @@ class Instrument:
             )
         object.__setattr__(self, "background_rate", tuple(float(x) for x in bg))
         object.__setattr__(self, "n_pulses", int(self.n_pulses))
+        if self.speckle is not None and not isinstance(self.speckle, Speckle):
+            raise Error(
+                f"invalid speckle of type {type(self.speckle).__name__}: None or a "
+                "pprender.inverse.speckle.Speckle (e.g. Speckle(dof=4.0))"
+            )
 
     # ------------------------------------------------------------------ link budget
 
@@ -778,6 +790,11 @@ class Measurement:
         The seed given, if any.
     extra : dict
         Free-form additions; empty as :func:`measure` returns it.
+    speckle_dof : numpy.ndarray or None
+        (..., B, C): each count's marginal speckle degrees of freedom in [1, inf]
+        (:func:`~pprender.inverse.speckle.channel_dof`, through the jitter blur:
+        :func:`~pprender.inverse.speckle.blurred_dof`), what :mod:`pprender.inverse.fit`'s
+        speckle likelihood needs; None without speckle.
     range_axis : numpy.ndarray
         (B,) bin centres (m).
     time_axis : numpy.ndarray
@@ -801,6 +818,7 @@ class Measurement:
     instrument: Instrument
     seed: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    speckle_dof: np.ndarray | None = None
 
     @property
     def range_axis(self) -> np.ndarray:
@@ -831,6 +849,7 @@ class Measurement:
             channel_names=self.channel_names,
             instrument=self.instrument,
             seed=self.seed,
+            speckle_dof=None if self.speckle_dof is None else self.speckle_dof[index],
         )
 
     # ------------------------------------------------------------------ saving
@@ -845,7 +864,8 @@ class Measurement:
           ``range`` (bin centres, m, with ``time`` ``2 r / c`` in s); ``range_edge`` (the
           ``bin_edges`` coordinate, ``B + 1``, m); ``channel`` (the channel names);
         * variables: ``counts`` (int64), ``expected`` and ``signal`` (leading axes,
-          ``range, channel``), ``background`` (``range, channel``), in counts;
+          ``range, channel``), ``background`` (``range, channel``), in counts; with
+          speckle only, ``speckle_dof`` (as ``counts``, float64);
         * attributes (a saved file adds ``created``, UTC): ``format``
           (``pprender.Measurement/1``), ``pprender_version``,
           ``wavelength`` (m, the instrument's), and as JSON text ``instrument`` (every
@@ -876,7 +896,7 @@ class Measurement:
             raise Error(f"invalid Measurement.counts: shape {k.shape}, expected (..., B, C)")
         b, c = k.shape[-2:]
         for fname, want in (("expected", k.shape), ("signal", k.shape), ("background", (b, c)),
-                            ("bin_edges", (b + 1,))):
+                            ("bin_edges", (b + 1,))) + ((("speckle_dof", k.shape),) if self.speckle_dof is not None else ()):
             a = np.asarray(getattr(self, fname))
             if a.shape != want:
                 raise Error(f"invalid Measurement.{fname}: shape {a.shape}, expected {want} (from counts {k.shape})")
@@ -910,6 +930,9 @@ class Measurement:
             "signal": _io.variable(dims, self.signal, {**counts_units, "long_name": "expected signal counts"}),
             "background": _io.variable(("range", "channel"), self.background, {**counts_units, "long_name": "expected background counts"}),
         }
+        if self.speckle_dof is not None:  # only with speckle: other files keep their layout
+            data_vars["speckle_dof"] = _io.variable(dims, self.speckle_dof, {
+                "units": "1", "long_name": "marginal speckle degrees of freedom of each count (inf: none)"})
         attrs = _io.base_attrs(
             "Measurement", FORMAT_VERSION, "pprender measurement",
             "SI units; counts are detected photo-electrons; link budget and channels as in "
@@ -971,6 +994,7 @@ class Measurement:
             instrument=instrument,
             seed=_io.from_json(ds.attrs, "seed", where),
             extra=dict(_io.from_json(ds.attrs, "extra", where)),
+            speckle_dof=_io.array(ds, "speckle_dof", dims, where) if "speckle_dof" in ds.variables else None,
         )
 
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> None:
@@ -1050,12 +1074,16 @@ def _instrument_params(inst: Instrument) -> dict[str, Any]:
             "description": ch.description,
         },
         "n_pulses": int(inst.n_pulses),
+        # only when set: files of speckle-free instruments keep their layout
+        **({} if inst.speckle is None else {"speckle": inst.speckle.to_params()}),
     }
 
 
 def _instrument_from_params(d: Any) -> Instrument:
     kw = dict(d)
     kw["channels"] = Channels(**kw["channels"])
+    if kw.get("speckle") is not None:
+        kw["speckle"] = Speckle.from_params(kw["speckle"])
     return Instrument(**kw)
 
 
@@ -1082,6 +1110,36 @@ def _warn_pile_up(lam: np.ndarray, instrument: Instrument) -> None:
     )
 
 
+def _speckle_state(
+    p: np.ndarray, mueller: bool, instrument: Instrument, area: Any = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What :mod:`pprender.inverse.speckle` needs of a profile (..., B, 4, 4) / (..., B, 4):
+    received Stokes vectors in counts per transmitted state (..., B, G, 4), each channel's
+    state (C,), and the degrees of freedom accumulated over each state's pulses (..., B, G)."""
+    sp = instrument.speckle
+    assert sp is not None
+    ch = instrument.channels
+    assert isinstance(ch, Channels)
+    cpcs = instrument.counts_per_cross_section
+    if mueller:
+        unique, gi = _speckle.generator_groups(ch.generators_array)
+        stokes = _speckle.received_stokes(p * cpcs, unique)
+    else:
+        unique, gi = ch.generators_array[:1], np.zeros(len(ch), dtype=np.intp)
+        stokes = (p * cpcs)[..., None, :]
+    n_bins = stokes.shape[-3]
+    if isinstance(sp.target_area, tuple) and len(sp.target_area) != n_bins:
+        raise Error(
+            f"invalid speckle: target_area has {len(sp.target_area)} values but the profile has {n_bins} range "
+            "bins (one area per bin, or a single value)"
+        )
+    m_pulse = np.asarray(sp.pulse_dof(instrument.aperture_diameter, instrument.wavelength, instrument.target_range,
+                                      area), dtype=np.float64)
+    share = np.array([ch.pulse_share[int(np.flatnonzero(gi == g)[0])] for g in range(len(unique))])
+    dof = _speckle.accumulated_dof(m_pulse[..., None], instrument.n_pulses * share, sp.correlation)
+    return stokes, gi, np.broadcast_to(np.asarray(dof, dtype=np.float64), stokes.shape[:-1])
+
+
 def measure(
     profile: Any,
     instrument: Instrument,
@@ -1093,6 +1151,15 @@ def measure(
     """Simulate a measurement: expected counts (:func:`expected_counts`) and Poisson shot noise.
 
     The noise is drawn with ``numpy.random.default_rng(seed)`` (or ``rng``; not both).
+
+    With ``instrument.speckle`` (a :class:`~pprender.inverse.speckle.Speckle`): per range
+    bin and transmitted state, a speckle coherency with the degrees of freedom of the
+    ``Speckle`` accumulated over that state's pulses
+    (:func:`~pprender.inverse.speckle.sample_intensity`; channels of one state see one
+    field), the drawn intensities blurred by the jitter (:func:`jitter_matrix`), then
+    Poisson counts with mean intensity plus background. The measurement's ``speckle_dof``
+    records each count's marginal degrees of freedom (what the fits' likelihood needs).
+    Without speckle (None) the draws are today's, bit for bit.
 
     Parameters
     ----------
@@ -1117,9 +1184,13 @@ def measure(
     Raises
     ------
     pprender.Error
-        For both ``seed`` and ``rng``, an invalid profile (as :func:`expected_counts`), or
+        For both ``seed`` and ``rng``, an invalid profile (as :func:`expected_counts`),
         expected counts beyond the largest Poisson mean that can be drawn (9.2e18, int64
-        counts).
+        counts), or, with a ``Speckle`` that takes the illuminated area from the render, a
+        profile without it (an array, or a RenderResult rendered without
+        ``("mueller", "range")``: render with ``outputs=("profile", "mueller", "range")`` or
+        give ``Speckle(target_area=...)`` or ``Speckle(dof=...)``), or a per-bin
+        ``target_area`` whose length is not the number of bins.
 
     Warns
     -----
@@ -1138,7 +1209,8 @@ def measure(
         raise Error(f"invalid rng of type {type(rng).__name__}: expected numpy.random.Generator")
     if not isinstance(instrument, Instrument):
         raise Error(f"invalid instrument of type {type(instrument).__name__}: expected pprender.instrument.Instrument")
-    p, e, _ = _profile_and_edges(profile, bin_edges, instrument)
+    p, e, mueller = _profile_and_edges(profile, bin_edges, instrument)
+    result = profile if isinstance(profile, RenderResult) else None
     if isinstance(profile, RenderResult):
         profile = p
     sig = expected_counts(profile, instrument, bin_edges=e, background=False)
@@ -1151,7 +1223,33 @@ def measure(
             f"Poisson mean that can be drawn ({_POISSON_MAX:.3g}, int64 counts); lower the pulse energy"
         )
     _warn_pile_up(lam, instrument)
-    counts = rng.poisson(lam).astype(np.int64)
+    dof_c = None
+    if instrument.speckle is None:
+        counts = rng.poisson(lam).astype(np.int64)
+    else:
+        area = None
+        sp = instrument.speckle
+        if sp.source == "render" and result is not None and result.range is not None and (
+            result.mueller is not None or result.stokes is not None or result.intensity is not None
+        ):
+            area = _speckle.illuminated_area(result, sp.pulse_fwhm)
+        stokes, gi, dof = _speckle_state(p, mueller, instrument, area)
+        rows = instrument.channels.rows  # type: ignore[union-attr]
+        inten = _speckle.sample_intensity(stokes, rows, gi, dof, rng)
+        dof_c = _speckle.channel_dof(stokes, rows, gi, dof)
+        if instrument.jitter > 0:
+            # the blur moves detected photons between bins: blur the drawn intensities
+            k = jitter_matrix(e, e, instrument.jitter_range)
+            s_src = np.clip(np.einsum("ci,...ci->...c", rows, stokes[..., gi, :]), 0.0, None)
+            dof_c = _speckle.blurred_dof(k, s_src, dof_c)
+            inten = np.einsum("ji,...ic->...jc", k, inten)
+        top = float(np.max(inten + bg, initial=0.0))
+        if not top <= _POISSON_MAX:
+            raise Error(
+                f"invalid profile/instrument: a speckle intensity of {top:.3g} counts in a bin, more than the largest "
+                f"Poisson mean that can be drawn ({_POISSON_MAX:.3g}, int64 counts); lower the pulse energy"
+            )
+        counts = rng.poisson(inten + bg).astype(np.int64)
     return Measurement(
         counts=counts,
         expected=lam,
@@ -1161,4 +1259,5 @@ def measure(
         channel_names=instrument.channel_names,
         instrument=instrument,
         seed=None if seed is None else int(seed),
+        speckle_dof=dof_c,
     )
