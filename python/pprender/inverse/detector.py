@@ -1,0 +1,587 @@
+"""What the detector records: photon counting with dead time (pile-up) or a linear-mode APD.
+
+Conventions (those of :mod:`pprender.inverse.instrument`): arrays are ``(..., B, C)``,
+range bins then polarization channels; ``expected`` holds the expected photo-electrons
+(signal + background) of each bin and channel accumulated over that channel's pulses,
+``pulses`` (``(C,)``, ``n_pulses * pulse_share``) the number of pulses each channel sees.
+The per-pulse expectation is ``lam = expected / pulses``. Each channel has its own
+detector; pulses, channels and leading (attitude) axes are independent.
+
+Kinds (:class:`Detector`):
+
+* ``"photon_counting"`` (SPAD, PMT in counting mode) with dead time ``dead_time`` (s):
+
+  - ``dead_time = 0``: no dead time; the counts are Poisson with mean ``expected``
+    (:func:`pprender.measure`'s model, drawn by the same ``rng.poisson`` call, bit for bit).
+  - ``dead_time >= gate``, the gate being the span of the bins, ``2 (e[-1] - e[0]) / c``
+    (the classic case: one event per pulse, the first photon). Photons arrive as a Poisson
+    process, ``lam_b`` expected in bin ``b`` of a pulse; the detector records the first
+    one, in bin ``b`` with Coates' (1968) probability
+    ``p_b = exp(-sum_{j<b} lam_j) (1 - exp(-lam_b))``, or nothing with
+    ``p_0 = exp(-sum_j lam_j)``. Over ``n`` pulses the recorded counts are multinomial
+    ``(n; p_1..p_B, p_0)``: :meth:`Detector.sample` draws them and
+    :meth:`Detector.log_likelihood` is their exact log-pmf. :func:`coates_correction`
+    inverts the mean (the maximum-likelihood estimate of ``lam``,
+    ``lam_b = -ln(1 - k_b / (n - sum_{j<b} k_j))``), with its delta-method standard error.
+    The gate is taken to open at the first bin edge (the background before it is not
+    counted) and the detector to recover between pulses (dead time shorter than the pulse
+    period).
+  - ``0 < dead_time < gate``: refused (:class:`pprender.Error`). A detector recovering
+    within the gate records several events per pulse; the recorded counts of the bins of a
+    pulse are then a dependent (non-multinomial) vector whose likelihood over ``n`` pulses
+    has no closed form (it needs the per-pulse joint law of a renewal process with a
+    piecewise-constant rate), and an approximate one would be a silent wrong answer in the
+    fits. Model such a detector as ``dead_time = 0`` only where it stays well below one
+    count per dead time (:data:`pprender.inverse.instrument.PILE_UP_THRESHOLD`).
+
+* ``"linear"`` (linear-mode APD): gain ``G``, ionization ratio ``k`` (hole-to-electron
+  for an electron-injected APD, ``k <= 1``), McIntyre's (1966) excess noise factor
+  ``F = k G + (1 - k) (2 - 1/G)``, amplifier noise ``sigma_a`` (electrons RMS per bin and
+  pulse at the amplifier input, i.e. ``sigma_a / G`` photo-electrons) and a saturation
+  level (photo-electrons per bin and pulse) above which a :class:`SaturationWarning` is
+  given. The record is an analog photo-electron estimate (float) per bin with mean
+  ``N = expected`` and variance ``F N + pulses (sigma_a / G)^2``.
+
+  The sampler draws the primary photo-electrons ``m ~ Poisson(N)`` and their multiplied
+  charge as a sum of ``m`` independent gains, each a gamma variable of mean ``G`` and
+  variance ``(F - 1) G^2`` (the two-moment gamma approximation of McIntyre's
+  single-electron gain distribution; sums of gammas are gamma, so the bin's output over
+  all its pulses is ``Gamma(m / (F - 1), (F - 1))`` photo-electrons), then adds Gaussian
+  amplifier noise. Its mean and variance are exactly ``N`` and ``F N + pulses (sigma_a /
+  G)^2``, it keeps McIntyre's positive skew and the no-electron atom at 0, and ``G = 1``
+  (``F = 1``) gives the Poisson count ``m``. :meth:`Detector.log_likelihood` for this kind
+  is the Gaussian with the same two moments (the sampler's law, a Poisson mixture of
+  gammas convolved with a Gaussian, has no closed form). Its error falls like the
+  skewness ``~ (1 + 2 (F - 1)) / sqrt(F N)`` (docs/detector-atmosphere.md gives the
+  measured distance between the two laws).
+
+References: Coates, J. Phys. E 1, 878 (1968); McIntyre, IEEE Trans. Electron Devices 13,
+164 (1966); Conradi, IEEE Trans. Electron Devices 19, 713 (1972).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.special import gammaln, xlogy
+
+from .._core import Error
+
+__all__ = [
+    "DETECTOR_KINDS",
+    "Detector",
+    "SaturationWarning",
+    "coates_correction",
+    "coates_probabilities",
+    "excess_noise_factor",
+]
+
+#: The kinds :class:`Detector` accepts.
+DETECTOR_KINDS = ("photon_counting", "linear")
+
+_C = 299_792_458.0
+
+
+class SaturationWarning(UserWarning):
+    """A linear-mode detector was asked for more photo-electrons per bin and pulse than its saturation level.
+
+    The recorded values assume a linear response; above saturation a real detector's
+    output is compressed (:class:`Detector`).
+    """
+
+
+def _number(name: str, value: Any, lo: float, hi: float, lo_open: bool, hi_open: bool, unit: str) -> float:
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    v = float(value) if ok else math.nan
+    ok = ok and not math.isnan(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    if not ok:
+        rng = ("(" if lo_open else "[") + f"{lo:g}, {hi:g}" + (")" if hi_open else "]")
+        raise Error(f"invalid {name} = {value!r}: a number in {rng} ({unit})")
+    return v
+
+
+def _array(value: Any, name: str) -> np.ndarray:
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError):
+        raise Error(f"invalid {name}: not an array of numbers") from None
+    if raw.dtype.kind not in "biuf":
+        raise Error(f"invalid {name}: dtype {raw.dtype}, an array of real numbers (not text, None or complex)")
+    return raw.astype(np.float64)
+
+
+def excess_noise_factor(gain: Any, ionization_ratio: Any) -> Any:
+    """McIntyre's excess noise factor ``F = k G + (1 - k) (2 - 1/G)`` of an APD.
+
+    Parameters
+    ----------
+    gain : float or array_like
+        Mean gain ``G >= 1``.
+    ionization_ratio : float or array_like
+        Ionization coefficient ratio ``k`` in [0, 1] (the carrier injected is the more
+        ionizing one).
+
+    Returns
+    -------
+    float or numpy.ndarray
+        ``F >= 1`` (``F = 1`` at ``G = 1``; ``F = G`` at ``k = 1``; ``F -> 2`` as
+        ``G -> inf`` at ``k = 0``), broadcast over the inputs.
+
+    Raises
+    ------
+    pprender.Error
+        For ``G < 1``, ``k`` outside [0, 1], or values that are not finite numbers.
+    """
+    g = _array(gain, "gain")
+    k = _array(ionization_ratio, "ionization_ratio")
+    if not np.all(np.isfinite(g)) or np.any(g < 1):
+        raise Error("invalid gain: finite values >= 1")
+    if not np.all(np.isfinite(k)) or np.any(k < 0) or np.any(k > 1):
+        raise Error("invalid ionization_ratio: values in [0, 1]")
+    f = k * g + (1.0 - k) * (2.0 - 1.0 / g)
+    return float(f) if np.ndim(f) == 0 else f
+
+
+def coates_probabilities(lam: Any) -> np.ndarray:
+    """Coates' per-pulse probabilities of the first recorded photon, per bin and "none".
+
+    Parameters
+    ----------
+    lam : array_like
+        (..., B, C) expected photo-electrons per bin and pulse (signal + background), finite
+        and ``>= 0``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., B + 1, C): ``p_b = exp(-sum_{j<b} lam_j) (1 - exp(-lam_b))`` for the bins, then
+        ``exp(-sum_j lam_j)`` (no event); each column sums to 1.
+
+    Raises
+    ------
+    pprender.Error
+        For values that are not finite and ``>= 0`` or an array that is not (..., B, C).
+    """
+    lam = _lam_array(lam, "lam")
+    before = np.cumsum(lam, axis=-2) - lam  # sum_{j<b}
+    p = np.exp(-before) * -np.expm1(-lam)
+    none = np.exp(-np.sum(lam, axis=-2, keepdims=True))
+    return np.concatenate([p, none], axis=-2)
+
+
+def _lam_array(value: Any, name: str) -> np.ndarray:
+    a = _array(value, name)
+    if a.ndim < 2:
+        raise Error(f"invalid {name}: shape {a.shape}, expected (..., B, C)")
+    if not np.all(np.isfinite(a)) or np.any(a < 0):
+        raise Error(f"invalid {name}: must be finite and >= 0 (photo-electrons)")
+    return a
+
+
+def _pulses(pulses: Any, c: int, whole: bool) -> np.ndarray:
+    p = _array(pulses, "pulses")
+    if p.ndim == 0:
+        p = np.full(c, float(p))
+    if p.shape != (c,) or not np.all(np.isfinite(p)) or np.any(p <= 0):
+        raise Error(f"invalid pulses: {c} finite values > 0 (pulses per channel), got shape {p.shape}")
+    if whole:
+        r = np.round(p)
+        if np.any(np.abs(p - r) > 1e-9 * np.maximum(r, 1.0)) or np.any(r < 1):
+            raise Error(
+                f"invalid pulses = {p.tolist()}: a dead-time detector needs a whole number (>= 1) of pulses "
+                "per channel (n_pulses * pulse_share)"
+            )
+        p = r
+    return p
+
+
+def coates_correction(counts: Any, pulses: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Coates' pile-up correction: the expected counts per bin that recorded first-photon counts imply.
+
+    For a detector recording at most one event per pulse (:class:`Detector` with
+    ``dead_time >= gate``): ``lam_b = -ln(1 - k_b / (n - sum_{j<b} k_j))`` per pulse, the
+    maximum-likelihood estimate (each bin's recorded count is binomial over the pulses
+    still live at it), returned over all ``n`` pulses (``n lam_b``) as ``expected`` is.
+    Its standard error (delta method, evaluated at the estimate) is
+    ``n sqrt((exp(lam_b) - 1) / m_b)``, ``m_b = n - sum_{j<b} k_j`` the live pulses.
+
+    Parameters
+    ----------
+    counts : array_like
+        (..., B, C) recorded counts, non-negative integers (real numbers are accepted, e.g.
+        :meth:`Detector.mean`'s expected recorded counts, the exact inverse).
+    pulses : float or array_like
+        Pulses per channel, one value or ``(C,)``.
+
+    Returns
+    -------
+    estimate : numpy.ndarray
+        (..., B, C) corrected expected counts over the pulses. ``inf`` where every live
+        pulse recorded an event in the bin (no upper bound: more pulses or less light are
+        needed); ``nan`` where no pulse was live at the bin (earlier bins took them all: the
+        data say nothing about it).
+    std_error : numpy.ndarray
+        (..., B, C) standard errors (same conventions; ``0`` where the estimate is 0).
+
+    Raises
+    ------
+    pprender.Error
+        For negative or non-finite counts, counts whose sum over bins exceeds the pulses,
+        or invalid ``pulses``.
+    """
+    k = _lam_array(counts, "counts")
+    n = _pulses(pulses, k.shape[-1], whole=False)
+    if np.any(np.sum(k, axis=-2) > n * (1 + 1e-12)):
+        raise Error("invalid counts: more recorded events over the bins than pulses (at most one per pulse)")
+    live = n - (np.cumsum(k, axis=-2) - k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(live > 0, k / np.where(live > 0, live, 1.0), np.nan)
+        frac = np.clip(frac, 0.0, 1.0)
+        lam = -np.log1p(-frac)
+        err = np.sqrt(np.expm1(lam) / np.where(live > 0, live, np.nan))
+    return n * lam, n * err
+
+
+@dataclass(frozen=True)
+class Detector:
+    """A detector: photon counting with dead time, or a linear-mode APD (module docstring).
+
+    ``Detector()`` is the ideal photon counter (Poisson counts, as :func:`pprender.measure`).
+
+    Parameters
+    ----------
+    kind : {"photon_counting", "linear"}, optional
+        Default ``"photon_counting"``.
+    dead_time : float, optional
+        Photon counting: dead time (s), ``0`` (none: Poisson counts) or at least the range
+        gate (one event per pulse: Coates' multinomial), ``inf`` allowed; in [0, inf].
+        Default 0. Dead times between 0 and the gate are refused where the gate is known
+        (:meth:`sample` etc.; module docstring).
+    gain : float, optional
+        Linear: mean APD gain ``G`` in [1, 1e6]. Default 1.
+    ionization_ratio : float, optional
+        Linear: ionization coefficient ratio ``k`` in [0, 1]. Default 0.
+    amplifier_noise : float, optional
+        Linear: amplifier noise, electrons RMS per bin and pulse at the amplifier input,
+        in [0, 1e12]. Default 0.
+    saturation : float, optional
+        Linear: photo-electrons per bin and pulse above which the response is not linear
+        (:class:`SaturationWarning`), in (0, inf]. Default inf.
+
+    Raises
+    ------
+    pprender.Error
+        For a value outside its range, an unknown kind, or a parameter of the other kind
+        set away from its default (e.g. a gain for a photon counter).
+    """
+
+    kind: str = "photon_counting"
+    dead_time: float = 0.0
+    gain: float = 1.0
+    ionization_ratio: float = 0.0
+    amplifier_noise: float = 0.0
+    saturation: float = math.inf
+
+    def __post_init__(self) -> None:
+        if self.kind not in DETECTOR_KINDS:
+            raise Error(f"invalid kind = {self.kind!r}: one of {DETECTOR_KINDS}")
+        vals = {
+            "dead_time": _number("dead_time", self.dead_time, 0.0, math.inf, False, False, "s"),
+            "gain": _number("gain", self.gain, 1.0, 1e6, False, False, "mean APD gain"),
+            "ionization_ratio": _number("ionization_ratio", self.ionization_ratio, 0.0, 1.0, False, False, "k"),
+            "amplifier_noise": _number(
+                "amplifier_noise", self.amplifier_noise, 0.0, 1e12, False, False, "electrons RMS per bin and pulse"
+            ),
+            "saturation": _number(
+                "saturation", self.saturation, 0.0, math.inf, True, False, "photo-electrons per bin and pulse"
+            ),
+        }
+        other = ("gain", "ionization_ratio", "amplifier_noise", "saturation") if self.kind == "photon_counting" else (
+            "dead_time",
+        )
+        defaults = {"dead_time": 0.0, "gain": 1.0, "ionization_ratio": 0.0, "amplifier_noise": 0.0,
+                    "saturation": math.inf}
+        for name in other:
+            if vals[name] != defaults[name]:
+                raise Error(
+                    f"invalid {name} = {vals[name]!r} for kind={self.kind!r}: it applies to kind="
+                    f"{'linear' if self.kind == 'photon_counting' else 'photon_counting'!r} only"
+                )
+        for name, v in vals.items():
+            object.__setattr__(self, name, v)
+
+    # ------------------------------------------------------------------ regime
+
+    @property
+    def excess_noise(self) -> float:
+        """McIntyre's excess noise factor ``F`` (:func:`excess_noise_factor`; 1 for a photon counter)."""
+        if self.kind != "linear":
+            return 1.0
+        return float(excess_noise_factor(self.gain, self.ionization_ratio))
+
+    @property
+    def is_poisson(self) -> bool:
+        """Whether the records are Poisson counts with mean ``expected`` (a photon counter
+        without dead time: :func:`pprender.measure`'s model)."""
+        return self.kind == "photon_counting" and self.dead_time == 0.0
+
+    def regime(self, bin_edges: Any = None) -> str:
+        """The statistical model used on these bins: ``"poisson"``, ``"coates"`` or ``"linear"``.
+
+        Parameters
+        ----------
+        bin_edges : array_like, optional
+            (B + 1,) range bin edges (m), increasing; needed for a finite dead time > 0
+            (to compare it with the gate ``2 (e[-1] - e[0]) / c``).
+
+        Returns
+        -------
+        str
+            ``"poisson"`` (no dead time), ``"coates"`` (dead time at least the gate) or
+            ``"linear"`` (an APD).
+
+        Raises
+        ------
+        pprender.Error
+            For a dead time in (0, gate) (not modelled, module docstring), a finite dead
+            time > 0 without ``bin_edges``, or invalid ``bin_edges``.
+        """
+        if self.kind == "linear":
+            return "linear"
+        if self.dead_time == 0.0:
+            return "poisson"
+        if math.isinf(self.dead_time):
+            return "coates"
+        if bin_edges is None:
+            raise Error(
+                "invalid bin_edges = None: a detector with a finite dead time needs the bin edges to compare "
+                "the dead time with the range gate"
+            )
+        e = _array(bin_edges, "bin_edges")
+        if e.ndim != 1 or len(e) < 2 or not np.all(np.isfinite(e)) or not np.all(np.diff(e) > 0):
+            raise Error("invalid bin_edges: (B + 1,) finite, strictly increasing range edges (m)")
+        gate = 2.0 * float(e[-1] - e[0]) / _C
+        if self.dead_time >= gate:
+            return "coates"
+        raise Error(
+            f"invalid dead_time = {self.dead_time:g} s: shorter than the range gate ({gate:.4g} s, 2 x "
+            f"{float(e[-1] - e[0]):.4g} m / c). Modelled: dead_time = 0 (Poisson) or >= the gate (one event "
+            "per pulse, Coates); a detector recovering within the gate is not (pprender.inverse.detector)"
+        )
+
+    # ------------------------------------------------------------------ statistics
+
+    def _check(self, expected: Any, pulses: Any, bin_edges: Any) -> tuple[np.ndarray, np.ndarray, str]:
+        lam = _lam_array(expected, "expected")
+        mode = self.regime(bin_edges)
+        n = _pulses(pulses, lam.shape[-1], whole=mode == "coates")
+        return lam, n, mode
+
+    def mean(self, expected: Any, pulses: Any, *, bin_edges: Any = None) -> np.ndarray:
+        """The expected recorded value per bin and channel.
+
+        Parameters
+        ----------
+        expected : array_like
+            (..., B, C) expected photo-electrons over each channel's pulses (signal +
+            background).
+        pulses : float or array_like
+            Pulses per channel (``n_pulses * pulse_share``), one value or ``(C,)``; whole
+            numbers for a dead-time detector.
+        bin_edges : array_like, optional
+            (B + 1,) range bin edges (m), needed for a finite dead time (:meth:`regime`).
+
+        Returns
+        -------
+        numpy.ndarray
+            (..., B, C): ``expected`` itself (Poisson, linear), or ``n p_b`` (Coates'
+            probabilities, :func:`coates_probabilities`, of ``expected / n``).
+
+        Raises
+        ------
+        pprender.Error
+            For invalid arrays or pulses, or a dead time that is not modelled.
+        """
+        lam, n, mode = self._check(expected, pulses, bin_edges)
+        if mode != "coates":
+            return lam.copy()
+        return n * coates_probabilities(lam / n)[..., :-1, :]
+
+    def variance(self, expected: Any, pulses: Any, *, bin_edges: Any = None) -> np.ndarray:
+        """The variance of the recorded value per bin and channel.
+
+        Parameters
+        ----------
+        expected : array_like
+            (..., B, C) expected photo-electrons over each channel's pulses.
+        pulses : float or array_like
+            Pulses per channel, one value or ``(C,)``.
+        bin_edges : array_like, optional
+            (B + 1,) range bin edges (m), needed for a finite dead time.
+
+        Returns
+        -------
+        numpy.ndarray
+            (..., B, C): ``expected`` (Poisson), ``n p_b (1 - p_b)`` (Coates, multinomial),
+            ``F expected + pulses (sigma_a / G)^2`` (linear).
+
+        Raises
+        ------
+        pprender.Error
+            As :meth:`mean`.
+        """
+        lam, n, mode = self._check(expected, pulses, bin_edges)
+        if mode == "poisson":
+            return lam.copy()
+        if mode == "coates":
+            p = coates_probabilities(lam / n)[..., :-1, :]
+            return n * p * (1.0 - p)
+        return self.excess_noise * lam + n * (self.amplifier_noise / self.gain) ** 2
+
+    def sample(self, expected: Any, pulses: Any, rng: np.random.Generator, *, bin_edges: Any = None) -> np.ndarray:
+        """Draw what the detector records.
+
+        Parameters
+        ----------
+        expected : array_like
+            (..., B, C) expected photo-electrons over each channel's pulses (signal +
+            background).
+        pulses : float or array_like
+            Pulses per channel (``n_pulses * pulse_share``), one value or ``(C,)``; whole
+            numbers for a dead-time detector.
+        rng : numpy.random.Generator
+            The generator. Poisson: one ``rng.poisson(expected)`` call (as
+            :func:`pprender.measure`, bit for bit).
+        bin_edges : array_like, optional
+            (B + 1,) range bin edges (m), needed for a finite dead time.
+
+        Returns
+        -------
+        numpy.ndarray
+            (..., B, C): int64 counts (photon counting) or float64 photo-electron estimates
+            (linear).
+
+        Raises
+        ------
+        pprender.Error
+            For invalid arrays, pulses or ``rng``, or a dead time that is not modelled.
+
+        Warns
+        -----
+        SaturationWarning
+            Linear: where ``expected / pulses`` exceeds the saturation level (the values
+            are still drawn, linearly).
+        """
+        if not isinstance(rng, np.random.Generator):
+            raise Error(f"invalid rng of type {type(rng).__name__}: expected numpy.random.Generator")
+        lam, n, mode = self._check(expected, pulses, bin_edges)
+        if mode == "poisson":
+            return rng.poisson(lam).astype(np.int64)
+        if mode == "coates":
+            p = coates_probabilities(lam / n)
+            pm = np.moveaxis(p, -2, -1)  # (..., C, B + 1)
+            pm = pm / np.sum(pm, axis=-1, keepdims=True)
+            nn = np.broadcast_to(n.astype(np.int64), pm.shape[:-1])
+            k = rng.multinomial(nn, pm)
+            return np.moveaxis(k[..., :-1], -1, -2).astype(np.int64)
+        self._warn_saturation(lam, n)
+        m = rng.poisson(lam)
+        f = self.excess_noise
+        if f > 1.0:
+            x = rng.gamma(m / (f - 1.0), f - 1.0)
+        else:
+            x = m.astype(np.float64)
+        if self.amplifier_noise > 0:
+            x = x + rng.normal(0.0, 1.0, size=x.shape) * np.sqrt(n) * (self.amplifier_noise / self.gain)
+        return np.asarray(x, dtype=np.float64)
+
+    def log_likelihood(self, data: Any, expected: Any, pulses: Any, *, bin_edges: Any = None) -> Any:
+        """Log-likelihood of recorded ``data`` given ``expected``, summed over bins and channels.
+
+        Poisson: ``sum [k log(lam) - lam - log(k!)]`` (:func:`pprender.fit.poisson_log_likelihood`).
+        Coates: the exact multinomial log-pmf per channel, ``log n! - sum_b log k_b! -
+        log k_0! + sum_b k_b log p_b + k_0 log p_0``, ``k_0 = n - sum_b k_b`` the pulses
+        without an event. Linear: the Gaussian with the detector's mean and variance (module
+        docstring).
+
+        Parameters
+        ----------
+        data : array_like
+            (..., B, C) records (counts: non-negative integers; linear: real numbers).
+        expected : array_like
+            (..., B, C) expected photo-electrons over each channel's pulses; broadcast
+            against ``data``.
+        pulses : float or array_like
+            Pulses per channel, one value or ``(C,)``.
+        bin_edges : array_like, optional
+            (B + 1,) range bin edges (m), needed for a finite dead time.
+
+        Returns
+        -------
+        float or numpy.ndarray
+            Over the leading axes (a float for 2-D inputs); ``-inf`` for impossible data
+            (a count where nothing is expected, more events than pulses), never NaN.
+
+        Raises
+        ------
+        pprender.Error
+            For counts that are not non-negative integers, shapes that do not broadcast,
+            invalid ``expected`` or pulses, or a dead time that is not modelled.
+        """
+        lam, n, mode = self._check(expected, pulses, bin_edges)
+        x = _array(data, "data")
+        if x.ndim < 2 or not np.all(np.isfinite(x)):
+            raise Error(f"invalid data: finite values of shape (..., B, C), got shape {x.shape}")
+        try:
+            shape = np.broadcast_shapes(x.shape, lam.shape)
+        except ValueError:
+            raise Error(f"invalid data/expected: shapes {x.shape} and {lam.shape} do not broadcast") from None
+        if shape[-2:] != lam.shape[-2:]:
+            raise Error(f"invalid data: shape {x.shape}, its bins and channels differ from expected's {lam.shape}")
+        if mode != "linear" and (np.any(x < 0) or np.any(x != np.round(x))):
+            raise Error("invalid data: counts must be non-negative integers")
+        if mode == "poisson":
+            out = np.sum(xlogy(x, lam) - lam - gammaln(x + 1.0), axis=(-2, -1))
+        elif mode == "coates":
+            x, lam = np.broadcast_arrays(x, lam)
+            k0 = n - np.sum(x, axis=-2)
+            bad = np.any(k0 < 0, axis=-1)
+            k0 = np.maximum(k0, 0.0)
+            kk = np.concatenate([x, k0[..., None, :]], axis=-2)
+            # log p_b = -sum_{j<b} lam_j + log(1 - exp(-lam_b)): kept in logs for small lam_b
+            ll = lam / n
+            before = np.cumsum(ll, axis=-2) - ll
+            with np.errstate(divide="ignore"):
+                logp = np.concatenate([-before + np.log(-np.expm1(-ll)), -np.sum(ll, axis=-2, keepdims=True)], axis=-2)
+            possible = np.isfinite(logp)
+            terms = kk * np.where(possible, logp, 0.0)
+            terms = np.where((kk > 0) & ~possible, -np.inf, terms)
+            out = np.sum(gammaln(n + 1.0) - np.sum(gammaln(kk + 1.0), axis=-2) + np.sum(terms, axis=-2), axis=-1)
+            out = np.where(bad, -np.inf, out)
+        else:
+            v = self.excess_noise * lam + n * (self.amplifier_noise / self.gain) ** 2
+            v = np.broadcast_to(v, shape)
+            xb, mb = np.broadcast_arrays(x, lam)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z = np.where(v > 0, -0.5 * ((xb - mb) ** 2 / np.where(v > 0, v, 1.0) + np.log(2 * np.pi * v)), 0.0)
+            z = np.where((v <= 0) & (xb != mb), -np.inf, z)
+            out = np.sum(z, axis=(-2, -1))
+        return float(out) if np.ndim(out) == 0 else out
+
+    def _warn_saturation(self, lam: np.ndarray, n: np.ndarray) -> None:
+        per_pulse = lam / n
+        worst = float(np.max(per_pulse, initial=0.0))
+        if not worst > self.saturation:
+            return
+        n_over = int(np.sum(per_pulse > self.saturation))
+        warnings.warn(
+            f"detector: up to {worst:.3g} photo-electrons per bin and pulse expected, above the saturation "
+            f"level {self.saturation:g} ({n_over} bin/channel value(s)); the records assume a linear response "
+            "(lower the pulse energy or the gain).",
+            SaturationWarning,
+            stacklevel=3,
+        )
