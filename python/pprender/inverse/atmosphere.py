@@ -35,20 +35,28 @@ a mixed Poisson with the exact moments ``E K = lam``,
 ``Var K = lam + lam^2 sigma_I^2 / n``, and ``Cov(K_b, K_b') = lam_b lam_b' sigma_I^2 / n``
 between bins and channels that share the pulses (the common factor correlates them).
 :meth:`Atmosphere.sample_counts` draws this exactly (the ``n`` factors of each pulse
-group) up to ``n_exact`` pulses, and above it draws ``S`` from the gamma law with its
-mean 1 and variance ``sigma_I^2 / n`` (the central limit makes ``S`` nearly Gaussian there;
-the gamma keeps it positive).
+group) up to ``n_exact`` pulses; above it, it draws ``S`` from the law of the factor's
+family with mean 1 and variance ``sigma_I^2 / n`` (below).
 
-Likelihood (:meth:`Atmosphere.log_likelihood`): ``S`` is replaced by the gamma law with
-the same mean and variance, shape ``r = n / sigma_I^2``. Then the counts of one pulse
-group (every bin and channel seeing the same pulses) are negative multinomial, in closed
-form: ``log L = sum_b [k_b log lam_b - log k_b!] + log Gamma(r + K) - log Gamma(r)
-+ r log r - (r + K) log(r + Lam)`` with ``K``, ``Lam`` the group's total counts and
-expectation. Each bin's marginal is the negative binomial with mean ``lam`` and variance
-``lam + lam^2 / r`` (the first two moments exact), and the joint law keeps the
-correlation between bins and channels. Without scintillation it is the Poisson
-likelihood exactly. Its error against the exact mixed Poisson law is measured in
-docs/detector-atmosphere.md (total variation distance for n = 1, 10, 100).
+Likelihood (:meth:`Atmosphere.log_likelihood`). Given ``S`` the counts are independent
+Poisson, so the counts of one pulse group (every bin and channel seeing the same pulses)
+have ``log L = sum_b [k_b log lam_b - log k_b!] + log E[S^K exp(-Lam S)]``, ``K`` and
+``Lam`` the group's total counts and expectation: a one-dimensional integral, which keeps
+the correlation between bins and channels. ``approximation="auto"`` (default) evaluates
+it for ``S`` of the factor's family with mean 1 and variance ``sigma_I^2 / n``: the exact
+law for ``n = 1``; for ``n > 1`` a lognormal of index ``sigma_I^2 / n`` (Fenton-Wilkinson)
+or a gamma-gamma with both shapes scaled by the ``c`` giving that variance. The integrand
+is log-concave in ``ln S``: its mode by bisection, then 48-node Gauss-Hermite quadrature
+scaled to the mode's curvature (gamma-gamma: the smaller-shape gamma integrated in closed
+form). Its error against adaptive quadrature is below 1e-7 in ``log L`` for the lognormal
+and for gamma-gamma with ``max(alpha, beta) >= 1.5`` (every Rytov-derived pair), 4e-5 at
+``alpha = 0.8, beta = 0.6``. ``approximation="gamma"``: ``S`` gamma with shape
+``r = n / sigma_I^2``, the negative multinomial in closed form,
+``... + log Gamma(r + K) - log Gamma(r) + r log r - (r + K) log(r + Lam)``, each bin's
+marginal the negative binomial matched in the first two moments (faster, coarser at few
+pulses). Both have the exact mean and variance and are the Poisson likelihood without
+scintillation. Their errors against direct simulation (total variation distance for
+n = 1, 2, 10, 100) are in docs/detector-atmosphere.md.
 """
 
 from __future__ import annotations
@@ -323,7 +331,7 @@ class Atmosphere:
         Returns
         -------
         float or numpy.ndarray
-            The density (0 at ``I = 0`` where the law has none there).
+            The density (``0`` is returned at ``I = 0`` itself).
 
         Raises
         ------
@@ -344,14 +352,79 @@ class Atmosphere:
         else:
             a, b = float(self.alpha), float(self.beta)  # type: ignore[arg-type]
             z = 2.0 * np.sqrt(a * b * xs)
-            with np.errstate(divide="ignore"):
-                logk = np.log(kve(a - b, z)) - z  # K_v(z) = kve(v, z) exp(-z), no overflow
+            v = abs(a - b)
+            with np.errstate(divide="ignore", over="ignore"):
+                logk = np.log(kve(v, z)) - z  # K_v(z) = kve(v, z) exp(-z), no overflow at large z
+            if v > 0:
+                # small z, large v: K_v(z) ~ Gamma(v) / 2 (2 / z)^v (kve overflows there)
+                small = gammaln(v) - math.log(2.0) + v * np.log(2.0 / z)
+                logk = np.where(np.isfinite(logk), logk, small)
             logp = (math.log(2.0) + 0.5 * (a + b) * math.log(a * b) - gammaln(a) - gammaln(b)
                     + (0.5 * (a + b) - 1.0) * np.log(xs) + logk)
         out = np.where(pos, np.exp(logp), 0.0)
         return float(out) if np.ndim(out) == 0 else out
 
     # ------------------------------------------------------------------ accumulated counts
+
+    def _mean_law(self, n: float) -> "Atmosphere":
+        """The law of the same family as the factor with mean 1 and variance ``sigma_I^2 / n``:
+        the law used for the mean ``S`` of ``n`` factors (itself at ``n = 1``). Lognormal:
+        index ``sigma_I^2 / n`` (Fenton-Wilkinson); gamma-gamma: ``(c alpha, c beta)`` with
+        ``1/(c alpha) + 1/(c beta) + 1/(c^2 alpha beta) = sigma_I^2 / n``."""
+        if n == 1.0 or self.scintillation == "none":
+            return self
+        v = self.index / n
+        if self.scintillation == "lognormal":
+            return Atmosphere(scintillation="lognormal", scintillation_index=v)
+        a, b = float(self.alpha), float(self.beta)  # type: ignore[arg-type]
+        # y = 1 / c solves y (1/a + 1/b) + y^2 / (a b) = v (the positive root, without cancellation)
+        p1 = 1.0 / a + 1.0 / b
+        y = 2.0 * v / (p1 + math.sqrt(p1 * p1 + 4.0 * v / (a * b)))
+        return Atmosphere(scintillation="gamma_gamma", alpha=min(a / y, 1e8), beta=min(b / y, 1e8))
+
+    def _log_single_pulse(self, ktot: Any, ltot: Any) -> np.ndarray:
+        """``log E[S^K exp(-Lam S)]`` for one pulse, ``S`` the factor (arrays ``K``, ``Lam``)."""
+        kk = np.asarray(ktot, dtype=np.float64)
+        lt = np.asarray(ltot, dtype=np.float64)
+        shape = np.broadcast_shapes(kk.shape, lt.shape)
+        kk, lt = np.broadcast_to(kk, shape), np.broadcast_to(lt, shape)
+        zero = lt <= 0
+        lt = np.where(zero, 1.0, lt)
+        K, L = kk[..., None], lt[..., None]
+        if self.scintillation == "lognormal":
+            s2 = math.log1p(self.index)
+            c = -0.5 * math.log(2.0 * math.pi * s2)
+
+            def g(u: Any) -> Any:
+                return K * u - L * np.exp(u) - (u + 0.5 * s2) ** 2 / (2.0 * s2) + c
+
+            def dg(u: Any) -> Any:
+                return kk - lt * np.exp(u) - (u + 0.5 * s2) / s2
+
+            def d2g(u: Any) -> Any:
+                return -lt * np.exp(u) - 1.0 / s2
+        else:
+            a, b = float(self.alpha), float(self.beta)  # type: ignore[arg-type]
+            # X ~ Gamma(a, 1/a) over u = ln x, E_Y[(x Y)^K exp(-Lam x Y)] in closed form; the
+            # larger shape goes to the quadrature (its left tail in u decays like exp((a + K) u))
+            a, b = max(a, b), min(a, b)
+            c0 = a * math.log(a) - gammaln(a) + b * math.log(b) - gammaln(b)
+            cK = gammaln(b + K)
+
+            def g(u: Any) -> Any:
+                return c0 + cK + (a + K) * u - a * np.exp(u) - (b + K) * np.log(b + L * np.exp(u))
+
+            def dg(u: Any) -> Any:
+                e = np.exp(u)
+                return a + kk - a * e - (b + kk) * lt * e / (b + lt * e)
+
+            def d2g(u: Any) -> Any:
+                e = np.exp(u)
+                return -a * e - (b + kk) * b * lt * e / (b + lt * e) ** 2
+        with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
+            out = _log_laplace_gh(g, dg, d2g, shape)
+        # Lam = 0: E[S^K] is 1 for K = 0; a count where nothing is expected is impossible
+        return np.where(zero, np.where(kk > 0, -np.inf, 0.0), out)
 
     def _groups(self, c: int, pulses: Any, groups: Any) -> tuple[np.ndarray, np.ndarray]:
         p = _array(pulses, "pulses")
@@ -421,7 +494,8 @@ class Atmosphere:
             default: all channels see the same pulses.
         n_exact : int, optional
             Up to this many pulses the factors are drawn pulse by pulse; above, their mean
-            ``S`` is drawn from the gamma law of mean 1 and variance ``sigma_I^2 / n``.
+            ``S`` is drawn from the factor's family with mean 1 and variance
+            ``sigma_I^2 / n`` (module docstring).
             Default 100000.
 
         Returns
@@ -460,18 +534,21 @@ class Atmosphere:
                     left -= m
                 sk = total / n
             else:
-                r = n / self.index
-                sk = rng.gamma(r, 1.0 / r, lead)
+                sk = self._mean_law(float(n)).sample_factor(rng, lead)
             s[..., cols] = np.asarray(sk)[..., None]
         return rng.poisson(lam * s[..., None, :]).astype(np.int64)
 
-    def log_likelihood(self, counts: Any, expected: Any, pulses: Any, *, groups: Any = None) -> Any:
-        """Log-likelihood of accumulated counts under scintillation: negative multinomial per pulse group.
+    def log_likelihood(
+        self, counts: Any, expected: Any, pulses: Any, *, groups: Any = None, approximation: str = "auto"
+    ) -> Any:
+        """Log-likelihood of accumulated counts under scintillation, per pulse group (module docstring).
 
-        The exact Poisson log-likelihood without scintillation; otherwise the gamma-mixed
-        Poisson (module docstring): per group, ``sum_b [k_b log lam_b - log k_b!] +
-        log Gamma(r + K) - log Gamma(r) + r log r - (r + K) log(r + Lam)``,
-        ``r = n / sigma_I^2``.
+        The exact Poisson log-likelihood without scintillation. Otherwise, per group,
+        ``sum_b [k_b log lam_b - log k_b!] + log E[S^K exp(-Lam S)]``, ``S`` the mean factor
+        of the group's ``n`` pulses: exact for ``n = 1``, ``S`` moment-matched within the
+        factor's family above (``"auto"``), or gamma (``"gamma"``: the negative multinomial,
+        ``log Gamma(r + K) - log Gamma(r) + r log r - (r + K) log(r + Lam)``,
+        ``r = n / sigma_I^2``).
 
         Parameters
         ----------
@@ -485,6 +562,10 @@ class Atmosphere:
         groups : array_like, optional
             (C,) int labels of the channels that see the same pulses (:func:`pulse_groups`);
             default: all channels see the same pulses.
+        approximation : {"auto", "gamma"}, optional
+            ``"auto"`` (default): ``S`` of the factor's family with mean 1 and variance
+            ``sigma_I^2 / n`` (exact for one pulse), by quadrature; ``"gamma"``: ``S``
+            gamma, the closed-form negative multinomial.
 
         Returns
         -------
@@ -506,6 +587,8 @@ class Atmosphere:
             np.broadcast_shapes(k.shape, lam.shape)
         except ValueError:
             raise Error(f"invalid counts/expected: shapes {k.shape} and {lam.shape} do not broadcast") from None
+        if approximation not in ("auto", "gamma"):
+            raise Error(f'invalid approximation = {approximation!r}: "auto" or "gamma"')
         p, g = self._groups(lam.shape[-1], pulses, groups)
         poisson = np.sum(xlogy(k, lam) - gammaln(k + 1.0), axis=-2)  # (..., C), without -lam
         if self.scintillation == "none":
@@ -515,9 +598,13 @@ class Atmosphere:
         out = np.sum(poisson, axis=-1)
         for j in range(int(g.max()) + 1):
             cols = g == j
-            r = float(p[cols][0]) / self.index
+            n = float(p[cols][0])
             ktot = np.sum(kk[..., cols], axis=(-2, -1))
             ltot = np.sum(ll[..., cols], axis=(-2, -1))
+            if approximation == "auto":
+                out = out + self._mean_law(n)._log_single_pulse(ktot, ltot)
+                continue
+            r = n / self.index
             # log Gamma(r + K) - log Gamma(r) - K log r - (r + K) log(1 + Lam / r): the Poisson
             # limit (-Lam) without cancellation at large r (betaln keeps the Gamma ratio exact)
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -525,6 +612,30 @@ class Atmosphere:
             out = out + ratio - ktot * math.log(r) - (r + ktot) * np.log1p(ltot / r)
         out = np.where(np.isnan(out), -np.inf, out)
         return float(out) if np.ndim(out) == 0 else out
+
+
+_GH_X, _GH_W = np.polynomial.hermite.hermgauss(48)
+
+
+def _log_laplace_gh(g: Any, dg: Any, d2g: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``log int exp(g(u)) du`` for concave ``g`` (arrays of ``shape``): the mode by bisection
+    on ``g'`` (bracket grown by doubling), Gauss-Hermite nodes scaled by ``1 / sqrt(-g'')``."""
+    lo = np.full(shape, -1.0)
+    hi = np.full(shape, 1.0)
+    for _ in range(12):
+        lo = np.where(dg(lo) > 0, lo, 2.0 * lo)
+        hi = np.where(dg(hi) < 0, hi, 2.0 * hi)
+    lo, hi = np.maximum(lo, -700.0), np.minimum(hi, 700.0)
+    for _ in range(70):
+        mid = 0.5 * (lo + hi)
+        pos = dg(mid) > 0
+        lo, hi = np.where(pos, mid, lo), np.where(pos, hi, mid)
+    u0 = 0.5 * (lo + hi)
+    sd = 1.0 / np.sqrt(-d2g(u0))
+    u = u0[..., None] + math.sqrt(2.0) * sd[..., None] * _GH_X
+    terms = g(u) + (_GH_X**2 + np.log(_GH_W))
+    top = np.max(terms, axis=-1)
+    return top + np.log(np.sum(np.exp(terms - top[..., None]), axis=-1)) + np.log(math.sqrt(2.0) * sd)
 
 
 def _expected(value: Any) -> np.ndarray:
