@@ -76,6 +76,18 @@ def test_gamma_gamma_pdf_is_the_product_of_gammas() -> None:
             assert abs(atm.pdf(i) / want - 1) < 1e-7, (i, atm.pdf(i), want)
 
 
+@pytest.mark.parametrize("atm", LAWS, ids=["lognormal", "gamma_gamma", "rytov"])
+def test_laplace_transform(atm) -> None:
+    """E[exp(-t I)] against adaptive quadrature of the pdf (1e-9 absolute), 1 at t = 0, and
+    exp(-t) without scintillation."""
+    ts = np.array([0.0, 1e-3, 0.1, 1.0, 5.0, 50.0])
+    want = [sum(integrate.quad(lambda x: math.exp(-t * x) * atm.pdf(x), a, b, limit=200, epsabs=0, epsrel=1e-12)[0]
+                for a, b in ((0, 1), (1, 10), (10, np.inf))) for t in ts]
+    assert np.allclose(atm.laplace(ts), want, rtol=0, atol=1e-9)
+    assert atm.laplace(0.0) == 1.0
+    assert np.array_equal(Atmosphere().laplace(ts), np.exp(-ts))
+
+
 def test_gamma_gamma_pdf_near_zero() -> None:
     """With beta = 1 (Y exponential) the density of X Y tends to E[1 / X] f_Y(0) =
     alpha / (alpha - 1) as I -> 0: finite where K_v's scaled form overflows (1e-12)."""
@@ -258,5 +270,7 @@ def test_bad_arrays() -> None:
         LOGNORMAL.pdf(-1.0)
     with pytest.raises(pprender.Error, match="approximation"):
         LOGNORMAL.log_likelihood(np.ones((2, 2)), np.ones((2, 2)), 1, approximation="exact")
+    with pytest.raises(pprender.Error, match="invalid t"):
+        LOGNORMAL.laplace(-1.0)
     with pytest.raises(pprender.Error, match="n_exact"):
         LOGNORMAL.sample_counts(np.ones((2, 2)), 1, rng, n_exact=0)
