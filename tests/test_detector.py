@@ -20,6 +20,8 @@ from pprender.inverse.detector import (
     coates_correction,
     coates_probabilities,
     excess_noise_factor,
+    record,
+    record_log_likelihood,
 )
 
 C_LIGHT = 299_792_458.0
@@ -236,3 +238,54 @@ def test_bad_arrays() -> None:
         coates_correction(np.array([[3.0], [2.0]]), 4)  # 5 events in 4 pulses
     with pytest.raises(pprender.Error, match="gain"):
         excess_noise_factor(0.5, 0.1)
+
+
+def test_record_without_scintillation_is_the_detector() -> None:
+    lam = np.random.default_rng(1).uniform(0, 20, size=(3, 5, 2))
+    a = record(lam, 10, np.random.default_rng(4))
+    assert np.array_equal(a, np.random.default_rng(4).poisson(lam).astype(np.int64))
+    assert np.array_equal(record(lam, 10, np.random.default_rng(4), atmosphere=Atmosphere(zenith_transmission=0.5)), a)
+    assert record_log_likelihood(a, lam, 10) == pytest.approx(poisson_log_likelihood(a, lam), abs=1e-9)
+
+
+def test_record_coates_with_scintillation_per_pulse(rng) -> None:
+    """Two channels sharing 400 pulses (gamma-gamma factors), 3000 records simulated pulse by
+    pulse: each channel's mean within 5 sigmas of Coates' averaged probabilities, and the
+    covariance between the channels' total recorded counts (``n`` minus the pulses without
+    an event) within 5 standard errors of the joint law's ``n (L(A_B + A'_B) - L(A_B)
+    L(A'_B))``, clearly positive (the shared factor; independent channels would give 0)."""
+    atm = Atmosphere(scintillation="gamma_gamma", rytov_variance=2.0)
+    det = Detector(dead_time=math.inf)
+    n, reps = 400, 3000
+    per_pulse = np.stack([LAM, LAM[::-1] * 0.5], axis=-1)  # (B, 2)
+    expected = n * per_pulse
+    k = record(np.broadcast_to(expected, (reps,) + expected.shape), n, rng, detector=det, atmosphere=atm)
+    mean = det.mean(expected, n, laplace=atm.laplace)
+    sd = np.sqrt(det.variance(expected, n, laplace=atm.laplace) / reps)
+    assert np.all(np.abs(k.mean(axis=0) - mean) < 5 * sd)
+    a0, a1 = per_pulse.sum(axis=0)
+    cov = n * (atm.laplace(a0 + a1) - atm.laplace(a0) * atm.laplace(a1))
+    x, y = k[:, :, 0].sum(axis=1).astype(float), k[:, :, 1].sum(axis=1).astype(float)
+    prod = (x - x.mean()) * (y - y.mean())
+    se = np.std(prod) / math.sqrt(reps)
+    assert cov > 10 * se and abs(prod.mean() - cov) < 5 * se, (prod.mean(), cov, se)
+    # above n_exact: channels independent, marginally the same multinomial
+    k2 = record(np.broadcast_to(expected, (reps,) + expected.shape), n, rng, detector=det, atmosphere=atm, n_exact=10)
+    assert np.all(np.abs(k2.mean(axis=0) - mean) < 5 * sd)
+    ll = record_log_likelihood(k[0], expected, n, detector=det, atmosphere=atm)
+    assert ll == pytest.approx(det.log_likelihood(k[0], expected, n, laplace=atm.laplace), rel=1e-14)
+
+
+def test_record_linear_with_scintillation(rng) -> None:
+    """APD behind a lognormal atmosphere: 1e5 records' mean within 1 % and variance within 3 %
+    of N and F N + N^2 sigma_I^2 / n + pulses (sigma_a / G)^2; the likelihood is that Gaussian."""
+    atm = Atmosphere(scintillation="lognormal", scintillation_index=0.5)
+    det = Detector(kind="linear", gain=50.0, ionization_ratio=0.02, amplifier_noise=200.0)
+    n_pe, n = 300.0, 5
+    x = record(np.full((100_000, 1, 1), n_pe), n, rng, detector=det, atmosphere=atm)
+    var = det.excess_noise * n_pe + n_pe**2 * 0.5 / n + n * (200.0 / 50.0) ** 2
+    assert abs(x.mean() / n_pe - 1) < 0.01 and abs(x.var() / var - 1) < 0.03
+    ll = record_log_likelihood(x[:3], np.full((1, 1), n_pe), n, detector=det, atmosphere=atm)
+    assert np.allclose(ll, stats.norm.logpdf(x[:3, 0, 0], n_pe, math.sqrt(var)), rtol=1e-12)
+    with pytest.raises(pprender.Error, match="atmosphere"):
+        record(np.ones((2, 1)), 1, rng, atmosphere="vacuum")  # type: ignore[arg-type]

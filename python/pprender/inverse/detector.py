@@ -60,6 +60,12 @@ Kinds (:class:`Detector`):
   skewness ``~ (1 + 2 (F - 1)) / sqrt(F N)`` (docs/detector-atmosphere.md gives the
   measured distance between the two laws).
 
+Detector and atmosphere together: :func:`record` draws what the receiver records (the
+detector's records of the counts, scintillation included, channels sharing pulses
+correlated through the factor) and :func:`record_log_likelihood` is the matching
+log-likelihood (exact without scintillation and for one channel per pulse group; a
+composite likelihood otherwise, said there).
+
 References: Coates, J. Phys. E 1, 878 (1968); McIntyre, IEEE Trans. Electron Devices 13,
 164 (1966); Conradi, IEEE Trans. Electron Devices 19, 713 (1972).
 """
@@ -69,12 +75,15 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.special import gammaln, xlogy
 
 from .._core import Error
+
+if TYPE_CHECKING:  # the atmosphere imports this module's helpers; no import at run time
+    from .atmosphere import Atmosphere
 
 __all__ = [
     "DETECTOR_KINDS",
@@ -83,6 +92,8 @@ __all__ = [
     "coates_correction",
     "coates_probabilities",
     "excess_noise_factor",
+    "record",
+    "record_log_likelihood",
 ]
 
 #: The kinds :class:`Detector` accepts.
@@ -537,7 +548,10 @@ class Detector:
             k = rng.multinomial(nn, pm)
             return np.moveaxis(k[..., :-1], -1, -2).astype(np.int64)
         self._warn_saturation(lam, n)
-        m = rng.poisson(lam)
+        return self._amplify(rng.poisson(lam), n, rng)
+
+    def _amplify(self, m: np.ndarray, n: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The linear record of ``m`` primary photo-electrons (module docstring)."""
         f = self.excess_noise
         if f > 1.0:
             x = rng.gamma(m / (f - 1.0), f - 1.0)
@@ -548,7 +562,8 @@ class Detector:
         return np.asarray(x, dtype=np.float64)
 
     def log_likelihood(
-        self, data: Any, expected: Any, pulses: Any, *, bin_edges: Any = None, laplace: Any = None
+        self, data: Any, expected: Any, pulses: Any, *, bin_edges: Any = None, laplace: Any = None,
+        _extra_variance: Any = 0.0,
     ) -> Any:
         """Log-likelihood of recorded ``data`` given ``expected``, summed over bins and channels.
 
@@ -623,7 +638,7 @@ class Detector:
             out = np.sum(gammaln(n + 1.0) - np.sum(gammaln(kk + 1.0), axis=-2) + np.sum(terms, axis=-2), axis=-1)
             out = np.where(bad, -np.inf, out)
         else:
-            v = self.excess_noise * lam + n * (self.amplifier_noise / self.gain) ** 2
+            v = self.excess_noise * lam + n * (self.amplifier_noise / self.gain) ** 2 + _extra_variance
             v = np.broadcast_to(v, shape)
             xb, mb = np.broadcast_arrays(x, lam)
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -645,3 +660,179 @@ class Detector:
             SaturationWarning,
             stacklevel=3,
         )
+
+
+# ---------------------------------------------------------------------- detector + atmosphere
+
+
+def _setup(detector: Any, atmosphere: Any, bin_edges: Any) -> tuple[Detector, Any, str]:
+    det = Detector() if detector is None else detector
+    if not isinstance(det, Detector):
+        raise Error(f"invalid detector of type {type(det).__name__}: expected a Detector")
+    if atmosphere is not None and not all(hasattr(atmosphere, a) for a in ("laplace", "sample_counts", "index")):
+        raise Error(f"invalid atmosphere of type {type(atmosphere).__name__}: expected an Atmosphere")
+    atm = atmosphere if atmosphere is not None and atmosphere.scintillation != "none" else None
+    return det, atm, det.regime(bin_edges)
+
+
+def record(
+    expected: Any,
+    pulses: Any,
+    rng: np.random.Generator,
+    *,
+    detector: Detector | None = None,
+    atmosphere: "Atmosphere | None" = None,
+    bin_edges: Any = None,
+    groups: Any = None,
+    n_exact: int = 100_000,
+) -> np.ndarray:
+    """What the receiver records: the detector's records of the counts, scintillation included.
+
+    Without scintillation this is :meth:`Detector.sample` (a photon counter without dead
+    time: one ``rng.poisson(expected)`` call, :func:`pprender.measure`'s, bit for bit). With
+    scintillation (:class:`~pprender.inverse.atmosphere.Atmosphere`; its transmission is the
+    caller's, in ``expected``):
+
+    * no dead time: :meth:`Atmosphere.sample_counts` (exact up to ``n_exact`` pulses);
+    * dead time at least the gate: each pulse simulated (up to ``n_exact`` pulses per
+      channel): one factor ``I`` per pulse and group, and in each channel the first photon
+      at the bin where ``I A(t)`` (``A`` the cumulative expected photo-electrons of the
+      pulse) first exceeds an ``Exp(1)`` draw, exactly the first arrival of the Poisson
+      process; channels sharing pulses are correlated through ``I``. Above ``n_exact``,
+      each channel is drawn from its multinomial with Coates' probabilities averaged over
+      ``I`` (exact per channel, without the correlation between channels);
+    * linear APD: the primary photo-electrons from :meth:`Atmosphere.sample_counts`, then
+      the gain and amplifier noise.
+
+    Parameters
+    ----------
+    expected : array_like
+        (..., B, C) expected photo-electrons over each channel's pulses, without
+        scintillation (signal + background).
+    pulses : float or array_like
+        Pulses per channel (``n_pulses * pulse_share``), one value or ``(C,)``.
+    rng : numpy.random.Generator
+        The generator.
+    detector : Detector, optional
+        Default ``Detector()`` (Poisson counts).
+    atmosphere : Atmosphere, optional
+        Its scintillation is used (none by default).
+    bin_edges : array_like, optional
+        (B + 1,) range bin edges (m), needed for a finite dead time.
+    groups : array_like, optional
+        (C,) labels of the channels that see the same pulses
+        (:func:`pprender.inverse.atmosphere.pulse_groups`); default all alike.
+    n_exact : int, optional
+        Largest number of pulses simulated one by one (default 100000).
+
+    Returns
+    -------
+    numpy.ndarray
+        (..., B, C) int64 counts or float64 linear records.
+
+    Raises
+    ------
+    pprender.Error
+        For invalid arrays, pulses, groups, detector, atmosphere or ``rng``, or a dead time
+        that is not modelled.
+
+    Warns
+    -----
+    SaturationWarning
+        As :meth:`Detector.sample`.
+    """
+    det, atm, mode = _setup(detector, atmosphere, bin_edges)
+    if atm is None:
+        return det.sample(expected, pulses, rng, bin_edges=bin_edges)
+    if not isinstance(rng, np.random.Generator):
+        raise Error(f"invalid rng of type {type(rng).__name__}: expected numpy.random.Generator")
+    if mode == "poisson":
+        return np.asarray(atm.sample_counts(expected, pulses, rng, groups=groups, n_exact=n_exact))
+    lam, n, _ = det._check(expected, pulses, bin_edges, None)
+    if mode == "linear":
+        det._warn_saturation(lam, n)
+        m = atm.sample_counts(lam, n, rng, groups=groups, n_exact=n_exact)
+        return det._amplify(np.asarray(m), n, rng)
+    # Coates: validate the groups with the atmosphere's own check
+    _, g = atm._groups(lam.shape[-1], n, groups)
+    lead, b_count, c_count = lam.shape[:-2], lam.shape[-2], lam.shape[-1]
+    out = np.zeros(lam.shape, dtype=np.int64)
+    cum = np.cumsum(lam / n, axis=-2)  # (..., B, C): A_{b+1}, per pulse
+    n_lead = int(np.prod(lead, dtype=np.int64))
+    for k in range(int(g.max()) + 1):
+        cols = np.flatnonzero(g == k)
+        n_k = int(n[cols[0]])
+        if n_k > n_exact:
+            out[..., cols] = det.sample(lam[..., cols], n[cols], rng, laplace=atm.laplace)
+            continue
+        left = n_k
+        block = max(1, 4_000_000 // max(1, n_lead * b_count * len(cols)))
+        while left > 0:
+            m = min(left, block)
+            i_factor = np.asarray(atm.sample_factor(rng, lead + (m,)))  # (..., m)
+            for c in cols:
+                x = rng.exponential(1.0, lead + (m,)) / i_factor  # first arrival in units of A
+                first = np.sum(cum[..., None, :, c] < x[..., None], axis=-1)  # (..., m): bin, B = none
+                out[..., c] += np.sum(first[..., :, None] == np.arange(b_count), axis=-2)
+            left -= m
+    return out
+
+
+def record_log_likelihood(
+    data: Any,
+    expected: Any,
+    pulses: Any,
+    *,
+    detector: Detector | None = None,
+    atmosphere: "Atmosphere | None" = None,
+    bin_edges: Any = None,
+    groups: Any = None,
+) -> Any:
+    """Log-likelihood of what :func:`record` draws, summed over bins and channels.
+
+    Without scintillation, :meth:`Detector.log_likelihood` (exact Poisson or Coates;
+    Gaussian for the APD). With scintillation: no dead time,
+    :meth:`Atmosphere.log_likelihood` (per pulse group); dead time at least the gate, the
+    product over channels of the exact multinomial with Coates' probabilities averaged over
+    the factor (exact per channel; the correlation between channels sharing pulses, which
+    the sampler keeps, is left out: a composite likelihood); linear APD, the Gaussian with
+    variance ``F N + N^2 sigma_I^2 / n + pulses (sigma_a / G)^2`` per bin (the correlation
+    between bins left out).
+
+    Parameters
+    ----------
+    data : array_like
+        (..., B, C) records.
+    expected : array_like
+        (..., B, C) expected photo-electrons over each channel's pulses, without
+        scintillation.
+    pulses : float or array_like
+        Pulses per channel, one value or ``(C,)``.
+    detector : Detector, optional
+        Default ``Detector()``.
+    atmosphere : Atmosphere, optional
+        Its scintillation is used (none by default).
+    bin_edges : array_like, optional
+        (B + 1,) range bin edges (m), needed for a finite dead time.
+    groups : array_like, optional
+        (C,) labels of the channels that see the same pulses; default all alike.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        Over the leading axes (a float for 2-D inputs); ``-inf`` for impossible data.
+
+    Raises
+    ------
+    pprender.Error
+        As :meth:`Detector.log_likelihood` and :meth:`Atmosphere.log_likelihood`.
+    """
+    det, atm, mode = _setup(detector, atmosphere, bin_edges)
+    if atm is None:
+        return det.log_likelihood(data, expected, pulses, bin_edges=bin_edges)
+    if mode == "poisson":
+        return atm.log_likelihood(data, expected, pulses, groups=groups)
+    if mode == "coates":
+        return det.log_likelihood(data, expected, pulses, bin_edges=bin_edges, laplace=atm.laplace)
+    lam, n, _ = det._check(expected, pulses, bin_edges, None)
+    return det.log_likelihood(data, lam, n, _extra_variance=lam**2 * atm.index / n)
