@@ -258,6 +258,9 @@ def test_bad_arrays() -> None:
         airmass(0.5)
     with pytest.raises(pprender.Error, match="expected"):
         LOGNORMAL.sample_counts(np.array([[-1.0]]), 1, rng)
+    with pytest.raises(pprender.Error, match="whole number"):
+        LOGNORMAL.sample_counts(np.ones((2, 2)), 2.5, rng)
+    assert Atmosphere().sample_counts(np.ones((2, 2)), 0.25, rng).shape == (2, 2)  # no scintillation: any pulses
     with pytest.raises(pprender.Error, match="pulses/groups"):
         LOGNORMAL.sample_counts(np.ones((2, 2)), [10, 20], rng)  # one group, two pulse counts
     with pytest.raises(pprender.Error, match="groups"):
