@@ -269,6 +269,11 @@ def main() -> None:
         "mean 1 (lognormal, or gamma-gamma from alpha, beta or a Rytov variance) on the whole return "
         "of the pulse; accumulated counts `Poisson(lam S)`, `S` the mean factor of the pulses, with "
         "variance `lam + lam^2 sigma_I^2 / n`; a per-pulse-group likelihood.",
+        "* **Together** (`pprender.inverse.detector.record`, `record_log_likelihood`): a photon counter "
+        "recording the first photon of each pulse behind scintillation stays multinomial, with Coates' "
+        "probabilities averaged over the factor through its Laplace transform (`Atmosphere.laplace`); "
+        "a linear APD amplifies the mixed-Poisson primaries (variance `F N + N^2 sigma_I^2 / n + "
+        "pulses (sigma_a / G)^2`).",
         "",
     ]
     args.out.write_text("\n".join(head + body))
