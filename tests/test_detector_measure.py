@@ -312,3 +312,27 @@ def test_fisher_information_is_the_expected_curvature(sphere, receiver):
     else:
         assert f == pytest.approx(mean_curv, rel=0.03)
         assert f == pytest.approx(var, rel=0.15)
+
+
+def test_models_take_apd_records_and_refuse_what_they_cannot_model(sphere):
+    m_coates, m_plain, _ = sphere
+    apd = ins.Instrument(pulse_energy=m_plain.instrument.pulse_energy, target_range=2e5, n_pulses=2000,
+                         detector=Detector(kind="linear", gain=30.0, ionization_ratio=0.1))
+    kw = dict(lidar=pprender.Lidar(resolution=24), smooth=True, bounds={"scale": (0.5, 1.5)}, fitted_parts=())
+    model = fit.ForwardModel(models.sphere(radius=0.3, subdivisions=3), lambertian(), apd, m_plain.bin_edges,
+                             ("scale",), **kw)
+    lam = model.expected([1.0])
+    x = record(lam, apd.pulses, np.random.default_rng(2), detector=apd.detector)
+    assert x.dtype == np.float64
+    # the APD model's likelihood is the Gaussian of detector.record_log_likelihood, highest near the truth
+    ll = model.log_likelihood(np.array([[0.9], [1.0], [1.1]]), x)
+    assert ll[1] == pytest.approx(record_log_likelihood(x, lam, apd.pulses, detector=apd.detector), rel=1e-12)
+    assert ll[1] > max(ll[0], ll[2])
+    # a photon-counting model refuses real-valued records
+    with pytest.raises(pprender.Error, match="integers"):
+        m_plain.log_likelihood([1.0], x)
+    # a dead time inside the range gate (5.4 ns here) is refused when the model is made
+    short = ins.Instrument(pulse_energy=1e-3, target_range=2e5, detector=Detector(dead_time=1e-9))
+    with pytest.raises(pprender.Error, match="dead_time"):
+        fit.ForwardModel(models.sphere(radius=0.3, subdivisions=3), lambertian(), short, m_plain.bin_edges,
+                         ("scale",), **kw)

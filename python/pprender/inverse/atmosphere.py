@@ -267,7 +267,9 @@ class Atmosphere:
         Returns
         -------
         float
-            In (0, 1]; the instrument's ``transmission`` (the round trip is its square).
+            In (0, 1]; the instrument's one-way transmission (the round trip is its square):
+            ``Instrument(atmosphere=...)`` uses it in the link budget
+            (:attr:`pprender.inverse.instrument.Instrument.one_way_transmission`).
         """
         return float(self.zenith_transmission ** (airmass(self.elevation_deg) / airmass(90.0)))
 

@@ -825,7 +825,9 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None) -> np.
       Cramer-Rao sd it gives are too small where that correlation matters;
     * linear APD: the Gaussian's ``dmu_i dmu_j / v + dv_i dv_j / (2 v^2)``, ``mu = lam``,
       ``v = F lam + lam^2 sigma_I^2 / n + n (sigma_a / G)^2``: exact for that likelihood
-      (it needs only the records' first two moments);
+      (it needs only the records' first two moments); behind scintillation that likelihood
+      leaves out the correlation between bins sharing pulses, so its Cramer-Rao sd are too
+      small where ``lam^2 sigma_I^2 / n`` is not small against ``F lam``;
     * photon counting without dead time, with scintillation: the moment-based
       (quasi-likelihood) information of each pulse group, ``dlam^T Sigma^-1 dlam`` with
       ``Sigma = diag(lam) + (sigma_I^2 / n) lam lam^T`` the counts' exact covariance:
