@@ -34,6 +34,8 @@ MODULES = [
     "pprender.lidar.settings",
     "pprender.lidar",
     "pprender.inverse.instrument",
+    "pprender.inverse.detector",
+    "pprender.inverse.atmosphere",
     "pprender.inverse.database",
     "pprender.inverse.distributed",
     "pprender.inverse.classify",

@@ -2,6 +2,11 @@
 
 * :mod:`~pprender.inverse.instrument`: the link budget, polarization channels, jitter,
   background and shot noise (:func:`~pprender.inverse.instrument.measure`);
+* :mod:`~pprender.inverse.detector`: what the detector records: photon counting with dead
+  time (Coates' pile-up statistics and correction) or a linear-mode APD (excess noise,
+  saturation);
+* :mod:`~pprender.inverse.atmosphere`: transmission by elevation (Kasten & Young air mass)
+  and per-pulse scintillation (log-normal, gamma-gamma) with its effect on the counts;
 * :mod:`~pprender.inverse.database`: candidate databases, shapes x materials x attitudes
   in a resumable Zarr store; :mod:`~pprender.inverse.distributed` builds them on Dask;
 * :mod:`~pprender.inverse.so3`: rotation grids and distances;
@@ -17,9 +22,9 @@ which are the same module objects.
 
 from __future__ import annotations
 
-from . import classify, database, distributed, instrument, so3, speckle
+from . import atmosphere, classify, database, detector, distributed, instrument, so3, speckle
 
-__all__ = ["classify", "database", "distributed", "fit", "instrument", "so3", "speckle"]
+__all__ = ["atmosphere", "classify", "database", "detector", "distributed", "fit", "instrument", "so3", "speckle"]
 
 
 def __getattr__(name: str) -> object:

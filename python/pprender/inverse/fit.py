@@ -48,6 +48,14 @@ Conventions (written once here):
   :meth:`ForwardModel.speckle_dof`) or taken from the measurement (per-bin areas) and
   held fixed in the derivatives. ``M = inf`` everywhere is the Poisson likelihood, bit
   for bit.
+  With an instrument ``detector`` or ``atmosphere`` (:class:`~pprender.inverse.instrument.Instrument`)
+  the likelihood is that of what the receiver records,
+  :func:`pprender.inverse.detector.record_log_likelihood` (Coates' multinomial for a dead
+  time, a Gaussian with the APD's two moments, scintillation per pulse group), and the
+  data of a linear-mode APD may be real numbers; :func:`fisher_information` and
+  :func:`diagnose_fit` follow (their docstrings say how).
+  Speckle together with a dead time, an APD or scintillation is refused by
+  :class:`~pprender.inverse.instrument.Instrument` (their joint statistics are not modelled).
 * Attitudes (``reference_attitude``, :func:`attitude_error`): rotation matrices
   ``(..., 3, 3)`` (body to telescope), quaternions ``(..., 4)`` in pprender's scalar-first
   order ``(w, x, y, z)``, or :class:`scipy.spatial.transform.Rotation` objects (converted
@@ -82,6 +90,8 @@ from .. import lidar as _lidar
 from .. import _core
 from .._core import Error, Material
 from . import speckle as _speckle
+from .atmosphere import pulse_groups
+from .detector import Detector, coates_probabilities, record, record_log_likelihood
 from .instrument import (
     Instrument,
     Measurement,
@@ -171,7 +181,7 @@ def _fit_settings(lidar: _lidar.Lidar, settings: Any, device: str, free: Sequenc
 # ---------------------------------------------------------------------- likelihood
 
 
-def _counts_array(counts: Any) -> np.ndarray:
+def _counts_array(counts: Any, real: bool = False) -> np.ndarray:
     try:
         k = np.asarray(counts)
     except (TypeError, ValueError):
@@ -179,6 +189,10 @@ def _counts_array(counts: Any) -> np.ndarray:
     if k.dtype == object or not (np.issubdtype(k.dtype, np.integer) or np.issubdtype(k.dtype, np.floating)):
         raise Error(f"invalid counts: dtype {k.dtype}, expected integers")
     k = k.astype(np.float64)
+    if real:  # a linear-mode APD's photo-electron estimates: any finite value
+        if not np.all(np.isfinite(k)):
+            raise Error("invalid counts: a linear-mode APD's records must be finite numbers")
+        return k
     if not np.all(np.isfinite(k)) or np.any(k < 0) or np.any(k != np.round(k)):
         raise Error("invalid counts: must be finite non-negative integers")
     return k
@@ -440,6 +454,8 @@ class ForwardModel:
             raise Error(f"invalid instrument of type {type(instrument).__name__}: expected Instrument")
         self.instrument = instrument
         self.bin_edges = _check_edges(bin_edges, "bin_edges").copy()
+        if instrument.detector is not None:
+            instrument.detector.regime(self.bin_edges)  # a dead time within the range gate is refused
         # parameters
         if isinstance(free, str):
             free = (free,)
@@ -805,7 +821,8 @@ class ForwardModel:
             counts = data.counts
         else:
             counts = data
-        k = _counts_array(counts)
+        det = self.instrument.detector
+        k = _counts_array(counts, real=det is not None and det.kind == "linear")
         shape = (len(self.bin_edges) - 1, len(self.channel_names))
         if k.shape != shape:
             raise Error(
@@ -885,18 +902,37 @@ class ForwardModel:
         """Log-likelihood of the counts for each row of expected counts; -inf where not ok."""
         lam = np.where(ok[:, None, None], lam, 1.0)
         if self.instrument.speckle is None:
-            return np.where(ok, _loglik(k, lam, lgk), -np.inf)
+            return np.where(ok, self._records_loglik(k, lam, lgk), -np.inf)
         s, m = self._signal_dof(lam, None if var is None else np.where(ok[:, None, None], var, 0.0), dof_data)
         if np.all(np.isinf(m)):
             return np.where(ok, _loglik(k, lam, lgk), -np.inf)  # no speckle anywhere: Poisson, bit for bit
         ll = _speckle.speckle_log_likelihood(np.broadcast_to(k, s.shape), s, self._background, m)
         return np.where(ok, ll, -np.inf)
 
+    @property
+    def _plain(self) -> bool:
+        """Whether the data are plain Poisson counts (no detector, no atmosphere)."""
+        return self.instrument.detector is None and self.instrument.atmosphere is None
+
+    def _records_loglik(self, k: np.ndarray, lam: np.ndarray, lgk: Any) -> Any:
+        """Log-likelihood of records ``k`` (B, C) at expected counts ``lam`` (n, B, C):
+        Poisson, or :func:`pprender.inverse.detector.record_log_likelihood` for the
+        instrument's detector and atmosphere."""
+        if self._plain:
+            return _loglik(k, lam, lgk)
+        inst = self.instrument
+        return record_log_likelihood(
+            k, lam, inst.pulses, detector=inst.detector, atmosphere=inst.atmosphere, bin_edges=self.bin_edges,
+            groups=pulse_groups(inst.channels.generators_array),  # type: ignore[union-attr]
+        )
+
     def log_likelihood(self, thetas: Any, data: Any) -> Any:
         """Log-likelihood of ``data`` (a :class:`Measurement` or counts (B, C)) at ``thetas``;
         ``-inf`` where the model is invalid. Not bounded by the prior.
 
-        Poisson (:func:`poisson_log_likelihood`) without speckle; with the instrument's
+        Poisson (:func:`poisson_log_likelihood`) without speckle, detector or atmosphere;
+        with the instrument's ``detector`` or ``atmosphere``, the likelihood of what the
+        receiver records (module docstring); with the instrument's
         :class:`~pprender.inverse.speckle.Speckle`, the composite speckle likelihood
         :func:`~pprender.inverse.speckle.speckle_log_likelihood` (each count's exact
         marginal law, channels multiplied as if independent; ``docs/speckle.md``: where
@@ -959,6 +995,26 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None, data: 
     (``docs/speckle.md``: up to 1.4x for co/cross channels, 2.2x for the six-channel
     polarimeter, in sd).
 
+    With the instrument's ``detector`` or ``atmosphere``, the expected minus Hessian of the
+    log-likelihood the fits use (:func:`pprender.inverse.detector.record_log_likelihood`):
+
+    * dead time at least the gate: per channel the multinomial's
+      ``n sum_{b, none} (dp_b / dtheta_i)(dp_b / dtheta_j) / p_b`` over Coates'
+      probabilities (averaged over the scintillation factor), exact; with scintillation
+      the likelihood leaves out the correlation between channels sharing pulses, so the
+      Cramer-Rao sd it gives are too small where that correlation matters;
+    * linear APD: the Gaussian's ``dmu_i dmu_j / v + dv_i dv_j / (2 v^2)``, ``mu = lam``,
+      ``v = F lam + lam^2 sigma_I^2 / n + n (sigma_a / G)^2``: exact for that likelihood
+      (it needs only the records' first two moments); behind scintillation that likelihood
+      leaves out the correlation between bins sharing pulses, so its Cramer-Rao sd are too
+      small where ``lam^2 sigma_I^2 / n`` is not small against ``F lam``;
+    * photon counting without dead time, with scintillation: the moment-based
+      (quasi-likelihood) information of each pulse group, ``dlam^T Sigma^-1 dlam`` with
+      ``Sigma = diag(lam) + (sigma_I^2 / n) lam lam^T`` the counts' exact covariance:
+      exact for the shape of the profile within a group (the multinomial given the total)
+      and ``1 / Var K`` for its total ``K``, which is exact for a gamma factor (negative
+      binomial totals) and a lower bound on the information otherwise.
+
     Parameters
     ----------
     model : ForwardModel
@@ -1005,6 +1061,8 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None, data: 
             pts.append(p)
     lam = model.expected(np.array(pts))
     jac = np.stack([(lam[1 + 2 * i] - lam[2 + 2 * i]) / (2 * h[i]) for i in range(model.ndim)])  # (p, B, C)
+    if not model._plain:
+        return _records_fisher(model, lam, h)
     lam0 = lam[0]
     w = np.where(lam0 > 0, 1.0 / np.where(lam0 > 0, lam0, 1.0), 0.0)
     if model.instrument.speckle is not None:
@@ -1013,6 +1071,46 @@ def fisher_information(model: ForwardModel, theta: Any, step: Any = None, data: 
         pos = s > 0
         w = np.where(pos, _speckle.fisher_weight(np.where(pos, s, 1.0), model._background, m), w)
     return np.einsum("ibc,jbc,bc->ij", jac, jac, w)
+
+
+def _records_fisher(model: ForwardModel, lam: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """The expected minus Hessian of the log-likelihood of the instrument's detector and
+    atmosphere (:func:`fisher_information`), from ``lam`` at ``theta`` and ``theta +- h_i e_i``."""
+    inst = model.instrument
+    det = Detector() if inst.detector is None else inst.detector
+    atm = inst.atmosphere if inst.atmosphere is not None and inst.atmosphere.scintillation != "none" else None
+    mode = det.regime(model.bin_edges)
+    n = inst.pulses
+
+    def diff(a: np.ndarray) -> np.ndarray:
+        return np.stack([(a[1 + 2 * i] - a[2 + 2 * i]) / (2 * h[i]) for i in range(model.ndim)])
+
+    if mode == "coates":
+        # per channel, multinomial over n pulses: n sum_{bins, none} dp_i dp_j / p
+        prob = coates_probabilities(lam / n, None if atm is None else atm.laplace)  # (2p + 1, B + 1, C)
+        dp, p0 = diff(prob), prob[0]
+        w = np.where(p0 > 0, n / np.where(p0 > 0, p0, 1.0), 0.0)
+        return np.einsum("ibc,jbc,bc->ij", dp, dp, w)
+    s = 0.0 if atm is None else atm.index / n  # (C,): the mean factor's variance per channel
+    if mode == "linear":
+        # Gaussian with mean lam and variance v: dmu^2 / v + dv^2 / (2 v^2)
+        v = det.excess_noise * lam + lam**2 * s + n * (det.amplifier_noise / det.gain) ** 2
+        dm, dv, v0 = diff(lam), diff(v), v[0]
+        w1 = np.where(v0 > 0, 1.0 / np.where(v0 > 0, v0, 1.0), 0.0)
+        return np.einsum("ibc,jbc,bc->ij", dm, dm, w1) + np.einsum("ibc,jbc,bc->ij", dv, dv, 0.5 * w1**2)
+    # Poisson with scintillation, per pulse group: dl^T Sigma^-1 dl, Sigma = diag(lam) + s lam lam^T
+    # (Sherman-Morrison: sum dl_i dl_j / lam - s (sum dl_i)(sum dl_j) / (1 + s Lam))
+    dl, lam0 = diff(lam), lam[0]
+    w = np.where(lam0 > 0, 1.0 / np.where(lam0 > 0, lam0, 1.0), 0.0)
+    F = np.einsum("ibc,jbc,bc->ij", dl, dl, w)
+    if atm is not None:
+        g = pulse_groups(inst.channels.generators_array)  # type: ignore[union-attr]
+        for j in range(int(g.max()) + 1):
+            cols = np.flatnonzero(g == j)
+            sg = float(atm.index / n[cols[0]])
+            tot = np.sum(dl[..., cols], axis=(-2, -1))
+            F = F - sg * np.outer(tot, tot) / (1.0 + sg * float(np.sum(lam0[:, cols])))
+    return F
 
 
 # ---------------------------------------------------------------------- nlopt
@@ -1062,7 +1160,8 @@ class FitResult:
         quadratic model of the log-likelihood: small at a converged maximum.
     deviance : float or None
         ``2 sum [k log(k / lam) - (k - lam)]`` at ``x``; with speckle, Pearson's
-        ``sum (k - lam)^2 / (lam + s^2 / M)`` (:func:`diagnose_fit`).
+        ``sum (k - lam)^2 / (lam + s^2 / M)``; ``-2 log L`` with an instrument
+        ``detector`` or ``atmosphere`` (:func:`diagnose_fit`).
     deviance_p : float or None
         Probability of a deviance at least as large under the fitted model (500 Poisson draws
         of the expected counts at ``x``, speckled ones with speckle; beyond the largest draw,
@@ -1147,6 +1246,25 @@ def _deviance(k: np.ndarray, lam: np.ndarray) -> np.ndarray:
     return 2.0 * np.sum(xlogy(k, k / lam) - (k - lam), axis=(-2, -1))
 
 
+#: Largest number of pulses per channel the diagnosis's bootstrap simulates one by one for a
+#: dead-time detector behind scintillation (above it, per-channel multinomial draws).
+BOOTSTRAP_N_EXACT = 1000
+
+
+def _deviance_draws(model: "ForwardModel", k: np.ndarray, lam: np.ndarray, rng: np.random.Generator) -> tuple[float, np.ndarray]:
+    """The deviance of ``k`` at ``lam`` and of 500 draws there (:func:`diagnose_fit`)."""
+    if model._plain:
+        D = float(_deviance(k, lam))
+        return D, _deviance(rng.poisson(lam[None], size=(500,) + lam.shape).astype(np.float64), lam[None])
+    inst = model.instrument
+    groups = pulse_groups(inst.channels.generators_array)  # type: ignore[union-attr]
+    draws = record(np.broadcast_to(lam, (500,) + lam.shape), inst.pulses, rng, detector=inst.detector,
+                   atmosphere=inst.atmosphere, bin_edges=model.bin_edges, groups=groups,
+                   n_exact=BOOTSTRAP_N_EXACT)
+    D = -2.0 * float(model._records_loglik(k, lam[None], None)[0])
+    return D, -2.0 * np.asarray(model._records_loglik(draws, lam[None], None), dtype=np.float64)
+
+
 def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, seed: int = 0) -> FitResult:
     """How far to trust a maximum-likelihood fit: a copy of ``result`` with its diagnosis.
 
@@ -1172,6 +1290,12 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
       independent) where ``M`` is the measurement's (per-bin areas): there, where
       channels of one state share a field and speckle dominates, the real statistic
       spreads more than these draws and the p-value can be too small (a false alarm);
+      With the instrument's ``detector`` or ``atmosphere`` the statistic is
+      ``-2 log L`` at the optimum (the likelihood of
+      :func:`pprender.inverse.detector.record_log_likelihood`, no saturated model
+      subtracted) and the 500 draws are what the receiver records there
+      (:func:`pprender.inverse.detector.record`, pulse by pulse up to
+      :data:`BOOTSTRAP_N_EXACT` pulses);
 
     Not a problem but reported (:attr:`FitResult.alternatives`, and a
     :class:`FitWarning`): other optima, more than 3 sd away, whose log-likelihood is within
@@ -1303,8 +1427,7 @@ def diagnose_fit(model: "ForwardModel", measurement: Any, result: FitResult, *, 
     if lam is not None:
         rng = np.random.default_rng(seed)
         if model.instrument.speckle is None:
-            D = float(_deviance(k, lam))
-            sims = _deviance(rng.poisson(lam[None], size=(500,) + lam.shape).astype(np.float64), lam[None])
+            D, sims = _deviance_draws(model, k, lam, rng)
         else:
             # speckle: Pearson's statistic with each count's variance lam + s^2 / M; its
             # draws speckled as measure() draws them (channels of one state share a field),

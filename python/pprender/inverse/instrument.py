@@ -33,7 +33,10 @@ with
   ``I_inc sigma / (4 pi R^2) A_rx``: the standard form;
 * ``A_rx = pi D^2 / 4`` (m^2), ``D`` the receiver aperture diameter;
 * ``eta``: system efficiency (receiver optics x detector quantum efficiency);
-* ``T``: one-way atmospheric transmission (``T^2`` for the round trip); ``R``: range (m).
+* ``T``: one-way atmospheric transmission (``T^2`` for the round trip): ``transmission``,
+  or an :class:`~pprender.inverse.atmosphere.Atmosphere`'s
+  :meth:`~pprender.inverse.atmosphere.Atmosphere.transmission` by elevation (one of the two;
+  :attr:`Instrument.one_way_transmission`); ``R``: range (m).
 
 Detector timing jitter (Gaussian, ``jitter`` s RMS, i.e. ``c jitter / 2`` m of range)
 blurs the signal: each rendered bin's content is spread uniformly over its bin, convolved
@@ -46,7 +49,14 @@ while its range gate is open, i.e. ``rate * (2 * bin width / c)`` per bin and pu
 
 Shot noise: counts are Poisson with mean ``signal + background`` (a photon-counting
 detector without dead time or pile-up: valid while the expected counts per bin and
-pulse are well below 1; a linear-mode detector's excess noise is not modelled).
+pulse are well below 1) by default. ``Instrument(detector=...)`` replaces them with what
+a :class:`~pprender.inverse.detector.Detector` records (dead time: Coates' first-photon
+counts; a linear-mode APD: float photo-electron estimates with excess noise), and
+``Instrument(atmosphere=...)`` adds an :class:`~pprender.inverse.atmosphere.Atmosphere`'s
+per-pulse scintillation (:func:`pprender.inverse.detector.record`; with neither, the
+counts are today's ``rng.poisson`` draws, bit for bit). Both act pulse by pulse, so with
+a dead time or scintillation every channel needs a whole number of pulses,
+``n_pulses * pulse_share``. Without a detector (or with a photon counter without dead time)
 :func:`measure` warns (:class:`PileUpWarning`, never refuses) where the expected counts
 per bin and per pulse of a channel exceed :data:`PILE_UP_THRESHOLD` = 0.1. Why 0.1: a
 single-photon detector whose dead time spans at least a bin records at most one event
@@ -55,8 +65,9 @@ per bin and pulse, on average ``1 - exp(-lam)`` of the ``lam`` expected, a loss 
 no longer Poisson). This is a lower bound on the distortion: a detector whose dead time
 spans many bins (or the whole range gate, one event per pulse) loses counts in later
 bins at lower per-bin rates, governed by the counts per pulse within a dead time. "Per
-pulse" counts the pulses a channel sees: ``n_pulses * pulse_share``. A detector model
-(dead time, pile-up, saturation) will replace this warning.
+pulse" counts the pulses a channel sees: ``n_pulses * pulse_share``. A detector with a
+dead time models pile-up instead (no warning); a linear-mode APD warns above its
+saturation level (:class:`~pprender.inverse.detector.SaturationWarning`).
 
 Wavelength: a :class:`pprender.RenderResult` records the wavelength it was rendered at
 (its materials' wavelength); :func:`expected_counts`, :func:`measure`,
@@ -90,6 +101,8 @@ from .._core import Error
 from ..lidar import SPEED_OF_LIGHT, RenderResult
 from . import speckle as _speckle
 from .speckle import Speckle
+from .atmosphere import Atmosphere, pulse_groups
+from .detector import Detector, record
 
 __all__ = [
     "PLANCK",
@@ -118,8 +131,9 @@ PILE_UP_THRESHOLD = 0.1
 class PileUpWarning(UserWarning):
     """:func:`measure` was asked for more than :data:`PILE_UP_THRESHOLD` expected counts per bin and pulse.
 
-    Detector dead time, pile-up and saturation, which are not modelled, would distort such a
-    measurement (module docstring).
+    Detector dead time, pile-up and saturation, which a Poisson photon counter does not model,
+    would distort such a measurement (module docstring): ``Instrument(detector=Detector(
+    dead_time=...))`` models them (:mod:`pprender.inverse.detector`).
     """
 
 
@@ -399,11 +413,26 @@ class Instrument:
         Laser speckle (:class:`pprender.inverse.speckle.Speckle`): :func:`measure` draws
         speckled counts and :mod:`pprender.inverse.fit` uses the speckle likelihood. Default
         None: no speckle, Poisson counts (today's model, the same draws bit for bit).
+    detector : Detector, optional
+        What the detector records (:class:`pprender.inverse.detector.Detector`): a photon
+        counter with a dead time (Coates' first-photon counts) or a linear-mode APD (float
+        photo-electron estimates). Default None: Poisson counts, as ``Detector()``.
+    atmosphere : Atmosphere, optional
+        The atmosphere (:class:`pprender.inverse.atmosphere.Atmosphere`): its one-way
+        transmission by elevation enters the link budget in place of ``transmission``
+        (give one of them: an atmosphere whose transmission is not 1 together with
+        ``transmission`` other than 1 is refused), its scintillation the counts. Default
+        None (vacuum).
 
     Raises
     ------
     pprender.Error
-        For a value outside its range, or one that is not a number (module docstring).
+        For a value outside its range, or one that is not a number (module docstring); a
+        ``detector`` or ``atmosphere`` of another type; both ``transmission`` and an
+        atmosphere's transmission other than 1; a dead time or scintillation with a channel
+        that sees a fractional number of pulses (``n_pulses * pulse_share``); ``speckle``
+        together with a detector other than a Poisson counter or with scintillation (their
+        joint statistics are not modelled).
     """
 
     pulse_energy: float
@@ -419,6 +448,8 @@ class Instrument:
     channels: str | Channels = "co_cross_linear"
     n_pulses: int = 1
     speckle: Speckle | None = None
+    detector: Detector | None = None
+    atmosphere: Atmosphere | None = None
 
     def __post_init__(self) -> None:
         _check_number("pulse_energy", self.pulse_energy, 0.0, 1e3, True, False, "J")
@@ -456,6 +487,16 @@ class Instrument:
                 f"invalid speckle of type {type(self.speckle).__name__}: None or a "
                 "pprender.inverse.speckle.Speckle (e.g. Speckle(dof=4.0))"
             )
+        _check_receiver(self)
+        if self.speckle is not None and (
+            (self.detector is not None and not self.detector.is_poisson)
+            or (self.atmosphere is not None and self.atmosphere.scintillation != "none")
+        ):
+            raise Error(
+                "invalid speckle together with a detector that is not a Poisson photon counter or with "
+                "scintillation: their joint statistics are not modelled (speckle, a dead time or an APD, and "
+                "scintillation each work alone; an atmosphere's transmission works with all)"
+            )
 
     # ------------------------------------------------------------------ link budget
 
@@ -489,7 +530,8 @@ class Instrument:
     @property
     def counts_per_cross_section(self) -> float:
         """Detected counts per m^2 of channel cross-section over all pulses:
-        ``n_pulses N_tx / A_beam * A_rx / (4 pi R^2) * eta * T^2`` (1/m^2)."""
+        ``n_pulses N_tx / A_beam * A_rx / (4 pi R^2) * eta * T^2`` (1/m^2), ``T``
+        :attr:`one_way_transmission`."""
         return (
             self.n_pulses
             * self.photons_per_pulse
@@ -497,8 +539,22 @@ class Instrument:
             * self.aperture_area
             / (4.0 * math.pi * self.target_range**2)
             * self.efficiency
-            * self.transmission**2
+            * self.one_way_transmission**2
         )
+
+    @property
+    def one_way_transmission(self) -> float:
+        """The one-way atmospheric transmission ``T`` of the link budget: ``transmission``,
+        or the atmosphere's :meth:`~pprender.inverse.atmosphere.Atmosphere.transmission`
+        (only one of them differs from 1)."""
+        if self.atmosphere is None:
+            return float(self.transmission)
+        return float(self.transmission) * self.atmosphere.transmission()
+
+    @property
+    def pulses(self) -> np.ndarray:
+        """(C,) pulses each channel sees, ``n_pulses * pulse_share``."""
+        return self.n_pulses * np.asarray(self.channels.pulse_share)  # type: ignore[union-attr]
 
     @property
     def jitter_range(self) -> float:
@@ -535,6 +591,37 @@ class Instrument:
                 "beyond (0, 1e3] J; raise n_pulses (or the aperture) first"
             )
         return replace(self, pulse_energy=e)
+
+
+def _check_receiver(inst: Instrument) -> None:
+    """Check ``inst.detector`` and ``inst.atmosphere`` against the rest of the instrument
+    (:class:`Instrument`'s Raises)."""
+    det, atm = inst.detector, inst.atmosphere
+    if det is not None and not isinstance(det, Detector):
+        raise Error(f"invalid detector of type {type(det).__name__}: a pprender.inverse.detector.Detector or None")
+    if atm is not None and not isinstance(atm, Atmosphere):
+        raise Error(
+            f"invalid atmosphere of type {type(atm).__name__}: a pprender.inverse.atmosphere.Atmosphere or None"
+        )
+    if atm is not None and inst.transmission != 1.0 and atm.transmission() != 1.0:
+        raise Error(
+            f"invalid transmission = {inst.transmission!r} with an atmosphere of transmission "
+            f"{atm.transmission():.6g} (elevation {atm.elevation_deg:g} deg): both are the one-way "
+            "transmission; give one of them (transmission=1, or Atmosphere(zenith_transmission=1))"
+        )
+    dead = det is not None and det.kind == "photon_counting" and det.dead_time > 0
+    scint = atm is not None and atm.scintillation != "none"
+    if dead or scint:
+        p = inst.pulses
+        r = np.round(p)
+        if np.any(np.abs(p - r) > 1e-9 * np.maximum(r, 1.0)) or np.any(r < 1):
+            share = np.asarray(inst.channels.pulse_share)  # type: ignore[union-attr]
+            raise Error(
+                f"invalid n_pulses = {inst.n_pulses} for these channels (pulse_share {sorted(set(share.tolist()))}): "
+                f"{'a dead time' if dead else 'scintillation'} acts pulse by pulse, so each channel needs a whole "
+                f"number (>= 1) of pulses n_pulses * pulse_share, got {p.tolist()}; choose n_pulses so that "
+                "every n_pulses * pulse_share is a whole number"
+            )
 
 
 # ---------------------------------------------------------------------- jitter
@@ -773,7 +860,10 @@ class Measurement:
     Attributes
     ----------
     counts : numpy.ndarray
-        (..., B, C) int64: Poisson draws.
+        (..., B, C) int64 counts: Poisson draws, or what the instrument's
+        :class:`~pprender.inverse.detector.Detector` records (a dead time: first-photon
+        counts); float64 photo-electron estimates for a linear-mode APD
+        (``Detector(kind="linear")``).
     expected : numpy.ndarray
         (..., B, C): their means (``signal + background``).
     signal : numpy.ndarray
@@ -925,7 +1015,7 @@ class Measurement:
             coords[d] = (d, np.arange(n), {"long_name": "attitude index"})
         counts_units = {"units": "1"}
         data_vars = {
-            "counts": _io.variable(dims, k, {**counts_units, "long_name": "detected counts (Poisson draws)"}),
+            "counts": _io.variable(dims, k, {**counts_units, "long_name": _counts_long_name(self.instrument)}),
             "expected": _io.variable(dims, self.expected, {**counts_units, "long_name": "expected counts, signal + background"}),
             "signal": _io.variable(dims, self.signal, {**counts_units, "long_name": "expected signal counts"}),
             "background": _io.variable(("range", "channel"), self.background, {**counts_units, "long_name": "expected background counts"}),
@@ -1050,11 +1140,46 @@ class Measurement:
         return cls.from_xarray(_io.read(path, "Measurement"))
 
 
+def _counts_long_name(inst: Instrument) -> str:
+    det = inst.detector
+    if det is None or det.is_poisson:
+        return "detected counts (Poisson draws)"
+    if det.kind == "linear":
+        return "recorded photo-electron estimates (linear-mode APD)"
+    return "recorded counts (first photon per pulse: dead time at least the range gate)"
+
+
+def _receiver_params(inst: Instrument) -> dict[str, Any]:
+    """The detector's and the atmosphere's settings as JSON values, only those set (files
+    without them load as before)."""
+    out: dict[str, Any] = {}
+    det = inst.detector
+    if det is not None:
+        out["detector"] = {
+            "kind": str(det.kind), "dead_time": float(det.dead_time), "gain": float(det.gain),
+            "ionization_ratio": float(det.ionization_ratio), "amplifier_noise": float(det.amplifier_noise),
+            "saturation": float(det.saturation),
+        }
+    atm = inst.atmosphere
+    if atm is not None:
+        a: dict[str, Any] = {"zenith_transmission": float(atm.zenith_transmission),
+                             "elevation_deg": float(atm.elevation_deg), "scintillation": str(atm.scintillation)}
+        if atm.scintillation == "lognormal":
+            a["scintillation_index"] = float(atm.scintillation_index)
+        elif atm.scintillation == "gamma_gamma":
+            if atm.rytov_variance is not None:
+                a["rytov_variance"] = float(atm.rytov_variance)
+            else:
+                a["alpha"], a["beta"] = float(atm.alpha), float(atm.beta)  # type: ignore[arg-type]
+        out["atmosphere"] = a
+    return out
+
+
 def _instrument_params(inst: Instrument) -> dict[str, Any]:
     """Every field of ``inst`` as JSON values (``_instrument_from_params`` rebuilds it)."""
     ch = inst.channels
     assert isinstance(ch, Channels)
-    return {
+    return _receiver_params(inst) | {
         "pulse_energy": float(inst.pulse_energy),
         "target_range": float(inst.target_range),
         "wavelength": float(inst.wavelength),
@@ -1084,6 +1209,10 @@ def _instrument_from_params(d: Any) -> Instrument:
     kw["channels"] = Channels(**kw["channels"])
     if kw.get("speckle") is not None:
         kw["speckle"] = Speckle.from_params(kw["speckle"])
+    if "detector" in kw:
+        kw["detector"] = Detector(**kw["detector"])
+    if "atmosphere" in kw:
+        kw["atmosphere"] = Atmosphere(**kw["atmosphere"])
     return Instrument(**kw)
 
 
@@ -1102,7 +1231,8 @@ def _warn_pile_up(lam: np.ndarray, instrument: Instrument) -> None:
         f"measure: up to {worst:.3g} expected counts per bin per pulse (channel "
         f"{instrument.channel_names[int(c)]!r}, bin {int(b)}; {n_over} bin/channel value(s) above "
         f"{PILE_UP_THRESHOLD:g}): beyond the photon-counting regime. Detector dead time, pile-up and "
-        f"saturation are not modelled: a detector recording one event per bin and pulse would lose "
+        f"saturation are not modelled (Instrument(detector=Detector(dead_time=...)) models a dead time at "
+        f"least the range gate): a detector recording one event per bin and pulse would lose "
         f"{100 * loss:.3g} % of these counts and they would not be Poisson. Lower the pulse energy or "
         "aperture, or spread the counts over more pulses (n_pulses).",
         PileUpWarning,
@@ -1138,6 +1268,16 @@ def _speckle_state(
     share = np.array([ch.pulse_share[int(np.flatnonzero(gi == g)[0])] for g in range(len(unique))])
     dof = _speckle.accumulated_dof(m_pulse[..., None], instrument.n_pulses * share, sp.correlation)
     return stokes, gi, np.broadcast_to(np.asarray(dof, dtype=np.float64), stokes.shape[:-1])
+def _record(lam: np.ndarray, bin_edges: np.ndarray, instrument: Instrument, rng: np.random.Generator) -> np.ndarray:
+    """What the instrument records for expected counts ``lam`` (..., B, C): Poisson draws
+    (one ``rng.poisson`` call) without a detector and an atmosphere, else
+    :func:`pprender.inverse.detector.record`."""
+    if instrument.detector is None and instrument.atmosphere is None:
+        return rng.poisson(lam).astype(np.int64)
+    return record(
+        lam, instrument.pulses, rng, detector=instrument.detector, atmosphere=instrument.atmosphere,
+        bin_edges=bin_edges, groups=pulse_groups(instrument.channels.generators_array),  # type: ignore[union-attr]
+    )
 
 
 def measure(
@@ -1150,7 +1290,12 @@ def measure(
 ) -> Measurement:
     """Simulate a measurement: expected counts (:func:`expected_counts`) and Poisson shot noise.
 
-    The noise is drawn with ``numpy.random.default_rng(seed)`` (or ``rng``; not both).
+    The noise is drawn with ``numpy.random.default_rng(seed)`` (or ``rng``; not both). With
+    an ``instrument.detector`` or ``instrument.atmosphere`` the counts are what that
+    receiver records (:func:`pprender.inverse.detector.record`: a dead time's first-photon
+    counts, a linear APD's float photo-electron estimates, scintillation per pulse, the
+    channels seeing the same transmitted pulses correlated through it); without them, the
+    Poisson draws of earlier versions, bit for bit.
 
     With ``instrument.speckle`` (a :class:`~pprender.inverse.speckle.Speckle`): per range
     bin and transmitted state, a speckle coherency with the degrees of freedom of the
@@ -1186,18 +1331,24 @@ def measure(
     pprender.Error
         For both ``seed`` and ``rng``, an invalid profile (as :func:`expected_counts`),
         expected counts beyond the largest Poisson mean that can be drawn (9.2e18, int64
-        counts), or, with a ``Speckle`` that takes the illuminated area from the render, a
-        profile without it (an array, or a RenderResult rendered without
-        ``("mueller", "range")``: render with ``outputs=("profile", "mueller", "range")`` or
-        give ``Speckle(target_area=...)`` or ``Speckle(dof=...)``), or a per-bin
-        ``target_area`` whose length is not the number of bins.
+        counts), a detector dead time shorter than the range gate of the bins (not
+        modelled: :meth:`pprender.inverse.detector.Detector.regime`), or, with a
+        ``Speckle`` that takes the illuminated area from the render, a profile without it
+        (an array, or a RenderResult rendered without ``("mueller", "range")``: render with
+        ``outputs=("profile", "mueller", "range")`` or give ``Speckle(target_area=...)`` or
+        ``Speckle(dof=...)``), or a per-bin ``target_area`` whose length is not the number
+        of bins.
 
     Warns
     -----
     PileUpWarning
-        Where a channel expects more than :data:`PILE_UP_THRESHOLD` counts per bin and per
-        pulse (signal plus background): the Poisson model ignores the dead time and pile-up
-        that distort such counts (module docstring). The measurement is still returned.
+        Without a detector, or with a photon counter without dead time: where a channel
+        expects more than :data:`PILE_UP_THRESHOLD` counts per bin and per pulse (signal
+        plus background): the Poisson model ignores the dead time and pile-up that distort
+        such counts (module docstring). The measurement is still returned.
+    SaturationWarning
+        A linear-mode APD asked for more photo-electrons per bin and pulse than its
+        saturation level (:class:`pprender.inverse.detector.SaturationWarning`).
     """
     if seed is not None and rng is not None:
         raise Error("invalid seed/rng: give one of them, not both")
@@ -1222,10 +1373,11 @@ def measure(
             f"invalid profile/instrument: up to {top:.3g} expected counts in a bin, more than the largest "
             f"Poisson mean that can be drawn ({_POISSON_MAX:.3g}, int64 counts); lower the pulse energy"
         )
-    _warn_pile_up(lam, instrument)
+    if instrument.detector is None or instrument.detector.is_poisson:
+        _warn_pile_up(lam, instrument)
     dof_c = None
     if instrument.speckle is None:
-        counts = rng.poisson(lam).astype(np.int64)
+        counts = _record(lam, e, instrument, rng)
     else:
         area = None
         sp = instrument.speckle
