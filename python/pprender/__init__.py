@@ -29,11 +29,17 @@ from . import inverse  # noqa: E402  (its modules' heavy imports are lazy)
 from .inverse import classify, database, distributed, instrument, so3  # noqa: E402
 from .inverse.classify import Classifier, NoMatchWarning
 from .inverse.instrument import Instrument, Measurement, PileUpWarning, expected_counts, measure
+from .inverse.atmosphere import Atmosphere
+from .inverse.detector import Detector
+from .inverse.speckle import Speckle
 from .inverse.database import build_database, open_database
 from .inverse.distributed import build_database_distributed
 
 __all__ = [
+    "Atmosphere",
     "BrdfTable",
+    "Detector",
+    "Speckle",
     "Classifier",
     "Instrument",
     "Measurement",
