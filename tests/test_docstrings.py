@@ -39,6 +39,7 @@ MODULES = [
     "pprender.inverse.classify",
     "pprender.inverse.fit",
     "pprender.inverse.so3",
+    "pprender.inverse.tumble",
     "pprender.mesh",
     "pprender.materials",
     "pprender.models",

@@ -7,7 +7,9 @@
 * :mod:`~pprender.inverse.so3`: rotation grids and distances;
 * :mod:`~pprender.inverse.classify`: the vector classifier;
 * :mod:`~pprender.inverse.fit`: likelihood, nlopt and emcee fits (imported on first use:
-  it loads scipy's spatial module).
+  it loads scipy's spatial module);
+* :mod:`~pprender.inverse.tumble`: tumbling targets: torque-free propagation, per-pulse
+  light time and aberration, spin-state fits (imported on first use, like ``fit``).
 
 The modules are also importable at their earlier paths (``pprender.instrument``, ...),
 which are the same module objects.
@@ -17,12 +19,12 @@ from __future__ import annotations
 
 from . import classify, database, distributed, instrument, so3
 
-__all__ = ["classify", "database", "distributed", "fit", "instrument", "so3"]
+__all__ = ["classify", "database", "distributed", "fit", "instrument", "so3", "tumble"]
 
 
 def __getattr__(name: str) -> object:
-    if name == "fit":
+    if name in ("fit", "tumble"):
         import importlib
 
-        return importlib.import_module(".fit", __name__)
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
