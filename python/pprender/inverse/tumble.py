@@ -751,6 +751,51 @@ def _positive_int(value: Any, name: str, lo: int = 1, hi: int = 10_000_000) -> i
     return int(value)
 
 
+def _spin_angle_grid(
+    like: "_Likelihood",
+    polar: np.ndarray,
+    azim: np.ndarray,
+    rates: np.ndarray,
+    phases: np.ndarray,
+    t: np.ndarray,
+    body_axis: int,
+    n_angles: int,
+    n_starts: int,
+    batch: int,
+) -> np.ndarray:
+    """Best (rate, phase) grid point of each of the ``n_starts`` best axes, (S, 4).
+
+    The expected counts of axis ``a`` at spin angle ``alpha`` are tabulated once
+    (``n_angles`` angles); a candidate's pulse ``t`` reads the angle nearest
+    ``phase + rate t``, so its log-likelihood is ``sum_t G[t, i_t] - F[i_t]`` with
+    ``G = k log(lam)^T`` and ``F = sum lam`` over the table.
+    """
+    alpha = np.arange(n_angles) * 2.0 * math.pi / n_angles
+    k = like.k.reshape(t.size, -1)
+    ang = phases[None, :, None] + rates[:, None, None] * t[None, None, :]  # (R, P, T)
+    idx = np.rint(ang / (2.0 * math.pi / n_angles)).astype(np.int64) % n_angles
+    rows = np.arange(t.size)
+    per_axis = max(1, batch * t.size // n_angles)
+    best = []
+    for i0 in range(0, polar.size, per_axis):
+        p = np.column_stack([polar[i0 : i0 + per_axis], azim[i0 : i0 + per_axis]])
+        p = np.column_stack([p, np.ones(len(p)), np.zeros(len(p))])
+        q = _principal(p, alpha, body_axis)  # (A, n_angles, 4)
+        lam = np.asarray(like.forward(q.reshape(-1, 4)), dtype=np.float64).reshape(len(p), n_angles, -1)
+        if lam.shape[-1] != k.shape[1] or not np.all(np.isfinite(lam)) or np.any(lam < 0):
+            raise Error("invalid forward: expected counts of the wrong shape, non-finite or < 0")
+        like.evaluations += len(p) * n_angles
+        for j in range(len(p)):
+            g = k @ xlogy(1.0, np.maximum(lam[j], 1e-300)).T  # (T, n_angles); log(0) guarded
+            g = np.where(np.isfinite(g), g, -1e300)
+            f = lam[j].sum(axis=1)  # (n_angles,)
+            ll = (g[rows, idx] - f[idx]).sum(axis=-1)  # (R, P)
+            r, ph = np.unravel_index(int(np.argmax(ll)), ll.shape)
+            best.append((float(ll[r, ph]) - like.lgk, p[j, 0], p[j, 1], rates[r], phases[ph]))
+    best.sort(key=lambda b: -b[0])
+    return np.array([b[1:] for b in best[:n_starts]])
+
+
 def fit_spin(
     data: Any,
     forward: Callable[[np.ndarray], Any],
@@ -761,8 +806,10 @@ def fit_spin(
     rate_bounds: tuple[float, float] | None = None,
     body_axis: int = 2,
     n_axes: int = 200,
+    axes: Any = None,
     n_rates: int = 32,
     n_phases: int = 12,
+    n_angles: int = 360,
     n_starts: int = 8,
     starts: Any = None,
     max_evals: int = 2000,
@@ -774,8 +821,14 @@ def fit_spin(
     every pulse is maximized over the spin parameters. Principal-axis spin: every point of
     a grid of ``n_axes`` axes (a Fibonacci sphere) x ``n_rates`` rates (uniform in
     ``rate_bounds``) x ``n_phases`` phases is evaluated, then nlopt's BOBYQA refines the
-    ``n_starts`` best grid points; the grid spacing in rate should keep the phase error at
-    the last pulse below ~1 rad (``(rate_max - rate_min) * duration / n_rates <~ 1``).
+    best grid point of each of the ``n_starts`` best axes; the grid spacing in rate should
+    keep the phase error at the last pulse below ~1 rad
+    (``(rate_max - rate_min) * duration / n_rates <~ 1``). Without a ``geometry`` (a fixed
+    telescope frame) the attitude of a principal-axis spin depends on ``phase + rate t``
+    only, so the grid stage renders each axis once at ``n_angles`` spin angles and reads
+    every (rate, phase) candidate's pulses off that table (nearest angle): its cost is
+    ``n_axes * n_angles`` forward evaluations, whatever ``n_rates`` and ``n_phases``. With a
+    geometry every candidate is evaluated (``n_axes * n_rates * n_phases * T``).
     General tumbling (8 parameters) is refined from ``starts`` (e.g. a principal fit's
     attitude and ``rate * e`` with a few inertia ratios).
 
@@ -802,6 +855,13 @@ def fit_spin(
         The principal axis of a principal-axis spin (0, 1, 2). Default 2.
     n_axes, n_rates, n_phases : int, optional
         Grid sizes (principal). Defaults 200, 32, 12.
+    axes : array_like, optional
+        (A, 3) candidate inertial axes (any norm > 0) replacing the ``n_axes`` Fibonacci
+        sphere (principal): e.g. a hemisphere when a symmetry maps it onto the other half
+        (a half turn about the line of sight does, :func:`spin_error`).
+    n_angles : int, optional
+        Spin-angle samples per axis of the grid stage without a geometry (principal), in
+        [8, 1e5]. Default 360.
     n_starts : int, optional
         Local refinements from the best grid points (principal). Default 8.
     starts : array_like, optional
@@ -857,20 +917,35 @@ def fit_spin(
         rb = np.asarray(rate_bounds, dtype=np.float64)
         if rb.shape != (2,) or not np.all(np.isfinite(rb)) or not 0 < rb[0] < rb[1]:
             raise Error(f"invalid rate_bounds = {rate_bounds!r}: (min, max) with 0 < min < max (rad/s)")
-        n_axes = _positive_int(n_axes, "n_axes")
         n_rates = _positive_int(n_rates, "n_rates")
         n_phases = _positive_int(n_phases, "n_phases")
-        axes = _fibonacci_sphere(n_axes)
+        n_angles = _positive_int(n_angles, "n_angles", 8, 100_000)
+        if axes is None:
+            axes = _fibonacci_sphere(_positive_int(n_axes, "n_axes"))
+        else:
+            try:
+                axes = np.asarray(axes, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise Error("invalid axes: not an (A, 3) array of numbers") from None
+            norms = np.linalg.norm(axes, axis=-1, keepdims=True) if axes.ndim == 2 else np.zeros(1)
+            if axes.ndim != 2 or axes.shape[1] != 3 or not np.all(np.isfinite(axes)) or np.any(norms == 0):
+                raise Error(f"invalid axes: shape {axes.shape}, expected finite non-zero (A, 3) vectors")
+            axes = axes / norms
+        n_axes = axes.shape[0]
         polar = np.arccos(np.clip(axes[:, 2], -1, 1))
         azim = np.arctan2(axes[:, 1], axes[:, 0])
         rates = rb[0] + (np.arange(n_rates) + 0.5) * (rb[1] - rb[0]) / n_rates
         phases = np.arange(n_phases) * 2.0 * math.pi / n_phases
-        grid = np.stack(np.meshgrid(np.arange(n_axes), rates, phases, indexing="ij"), axis=-1).reshape(-1, 3)
-        cand = np.column_stack([polar[grid[:, 0].astype(int)], azim[grid[:, 0].astype(int)], grid[:, 1], grid[:, 2]])
-        ll = np.concatenate(
-            [like(_principal(cand[i : i + batch], t, body_axis)) for i in range(0, cand.shape[0], batch)]
-        )
-        top = cand[np.argsort(-ll)[:n_starts]]
+        if geometry is None:
+            top = _spin_angle_grid(like, polar, azim, rates, phases, t, body_axis, n_angles, n_starts, batch)
+        else:
+            grid = np.stack(np.meshgrid(np.arange(n_axes), rates, phases, indexing="ij"), axis=-1).reshape(-1, 3)
+            idx = grid[:, 0].astype(int)
+            cand = np.column_stack([polar[idx], azim[idx], grid[:, 1], grid[:, 2]])
+            ll = np.concatenate(
+                [like(_principal(cand[i : i + batch], t, body_axis)) for i in range(0, cand.shape[0], batch)]
+            )
+            top = cand[np.argsort(-ll)[:n_starts]]
         x0s = top if extra is None else np.vstack([extra, top])
         lower = np.array([-0.5, -4 * math.pi, rb[0] * 0.9, -1e3])
         upper = np.array([math.pi + 0.5, 4 * math.pi, rb[1] * 1.1, 1e3])
