@@ -193,6 +193,26 @@ def test_static_target_light_time_is_range_over_c() -> None:
     assert np.all(g.point_ahead == 0)
 
 
+def test_rendered_flash_comes_when_the_front_faces_the_sensor() -> None:
+    # End to end through pprender.render: a plate (front +z: smooth aluminium, alpha 0.05;
+    # back: alpha 0.5, a ~100 times dimmer flash) spins about inertial +z with its body y on
+    # the axis; the target lies along +x from the sensor, so the line of sight (target to
+    # sensor) is -x. By hand: aligning body y with +z is a quarter turn about x (body
+    # z -> -y); after a spin angle alpha the front normal is (sin alpha, -cos alpha, 0),
+    # which faces the sensor at alpha = 3 pi / 2 (the back at pi / 2). The brightest of 72
+    # pulses over a turn must be the one nearest.
+    rate = 2 * math.pi / 7.2
+    t = np.arange(72) * 0.1
+    g = tumble.pulse_geometry(t, [1.0e6, 0.0, 0.0], up=[0.0, 0.0, 1.0])
+    q = tumble.principal_spin([0.0, 0.0, rate, 0.0], g.reflect_times, body_axis=1)
+    rough = pprender.materials.get("aluminium", alpha=0.5)
+    scene = pprender.Scene(pprender.models.plate(0.5, 0.5), {"front": pprender.materials.get("aluminium", alpha=0.05),
+                                                              "back": rough, "edge": rough})
+    res = pprender.render(scene, pprender.Lidar(resolution=16), g.attitudes(q), outputs=("profile",))
+    brightest = int(np.argmax(np.asarray(res.cross_section)[:, 0, 0]))
+    assert brightest == round(1.5 * math.pi / rate / 0.1) % 72
+
+
 # ---------------------------------------------------------------------- scoring
 
 
@@ -288,6 +308,16 @@ def test_tumbling_fit_refines_from_a_nearby_start(rng) -> None:
     omega_truth = tumble._rotate(tumble._rotvec_to_quat(truth[:3]), truth[3:6])
     axis_err, rate_err = tumble.spin_error(omega_truth, fit.omega)
     assert axis_err < 0.2 and rate_err < 0.002, (axis_err, rate_err)
+
+
+def test_fit_accepts_a_list_of_measurements() -> None:
+    # Measurements from pprender.measure stack into (T, B, C) counts, epoch by epoch.
+    inst = pprender.Instrument(pulse_energy=1e-7, target_range=1e5, n_pulses=1000)
+    edges = np.linspace(0.0, 0.3, 4)
+    prof = np.zeros((3, 4, 4))
+    prof[:, 0, 0] = prof[:, 1, 1] = 0.1
+    ms = [pprender.measure(prof * (i + 1), inst, bin_edges=edges, seed=i) for i in range(5)]
+    assert np.array_equal(tumble._counts(ms), np.stack([m.counts for m in ms]).astype(float))
 
 
 # ---------------------------------------------------------------------- errors
