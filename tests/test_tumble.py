@@ -312,7 +312,7 @@ def test_tumbling_fit_refines_from_a_nearby_start(rng) -> None:
 
 def test_fit_accepts_a_list_of_measurements() -> None:
     # Measurements from pprender.measure stack into (T, B, C) counts, epoch by epoch.
-    inst = pprender.Instrument(pulse_energy=1e-7, target_range=1e5, n_pulses=1000)
+    inst = pprender.Instrument(pulse_energy=1e-8, target_range=1e5, n_pulses=10000)
     edges = np.linspace(0.0, 0.3, 4)
     prof = np.zeros((3, 4, 4))
     prof[:, 0, 0] = prof[:, 1, 1] = 0.1
