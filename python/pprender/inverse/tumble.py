@@ -53,6 +53,13 @@ axis azimuth, rate, phase)`` (:func:`principal_spin`), and general tumbling, 8 p
 the Poisson log-likelihood summed over pulses is maximized by nlopt from a multi-start
 grid (the likelihood is very multimodal in the rate).
 
+Example (a tumbling target's renders, one per pulse)::
+
+    from pprender.inverse import tumble
+    g = tumble.pulse_geometry(t_tx, rel_position, rel_velocity)   # (T,), (T, 3), (T, 3)
+    q, omega = tumble.propagate(q0, omega0, (1.0, 1.4, 2.0), g.reflect_times)
+    res = pprender.render(scene, sensor, g.attitudes(q), outputs=("profile",))
+
 What a monostatic profile cannot see (scored by :func:`spin_error`):
 
 * ``q`` and ``-q`` (one rotation);
