@@ -158,6 +158,18 @@ def test_tumbling_spin_parameters() -> None:
     assert np.max(so3.angular_distance(q, qp)) < 1e-8
 
 
+def test_tumbling_start_reproduces_the_principal_spin() -> None:
+    # A pure spin about a principal axis is torque-free for any inertia: the integrator,
+    # started from tumbling_start, must give principal_spin's closed-form attitudes.
+    params = np.array([2.0, 0.4, -0.9, 1.3])
+    t = np.linspace(0.0, 12.0, 25)
+    start = tumble.tumbling_start(params, (0.5, 0.8), body_axis=0)
+    expected = tumble.principal_spin(params, t, body_axis=0)
+    assert np.max(so3.angular_distance(tumble.tumbling_spin(start, t), expected)) < 1e-8
+    with pytest.raises(pprender.Error, match="inertia_ratios"):
+        tumble.tumbling_start(params, (0.1, 0.2))
+
+
 # ---------------------------------------------------------------------- geometry
 
 

@@ -84,7 +84,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -105,6 +105,7 @@ __all__ = [
     "quaternion_multiply",
     "spin_error",
     "tumbling_spin",
+    "tumbling_start",
 ]
 
 
@@ -153,10 +154,6 @@ def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     u = q[..., 1:]
     t = 2.0 * np.cross(u, v)
     return v + w * t + np.cross(u, t)
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def _rotvec_to_quat(r: np.ndarray) -> np.ndarray:
@@ -461,6 +458,50 @@ def tumbling_spin(params: Any, times: Any, *, t0: float = 0.0, rtol: float = 1e-
     q0 = _rotvec_to_quat(p[:3])
     q, _ = propagate(q0, p[3:6], (p[6], p[7], 1.0), times, t0=t0, rtol=rtol, atol=rtol * 1e-2)
     return q
+
+
+def tumbling_start(principal_params: Any, inertia_ratios: Any, *, body_axis: int = 2) -> np.ndarray:
+    """The 8 tumbling parameters of a principal-axis spin: a start for a tumbling fit.
+
+    A spin about a principal axis is torque-free motion for any inertia, so
+    :func:`tumbling_spin` of the result gives the attitudes of :func:`principal_spin`
+    ``(principal_params, times)`` (for ``t0 = 0``); a tumbling fit started there (with a
+    few ``inertia_ratios``, or ``omega0`` nudged off the axis) explores tumbles near a
+    principal-axis fit.
+
+    Parameters
+    ----------
+    principal_params : array_like
+        (4,) ``(polar, azimuth, rate, phase)`` (:func:`principal_spin`).
+    inertia_ratios : array_like
+        (2,) ``(I1 / I3, I2 / I3)``, > 0, satisfying the triangle inequality.
+    body_axis : int, optional
+        The spin's principal axis (0, 1, 2). Default 2.
+
+    Returns
+    -------
+    numpy.ndarray
+        (8,) ``(rotation vector of q0, omega0, I1 / I3, I2 / I3)``.
+
+    Raises
+    ------
+    pprender.Error
+        For parameters that are not finite (4,), invalid ratios or ``body_axis``.
+    """
+    p = np.asarray(principal_params, dtype=np.float64)
+    if p.shape != (4,) or not np.all(np.isfinite(p)):
+        raise Error(f"invalid principal_params: shape {p.shape}, expected 4 finite numbers")
+    k = np.asarray(inertia_ratios, dtype=np.float64)
+    if k.shape != (2,):
+        raise Error(f"invalid inertia_ratios: shape {k.shape}, expected (I1 / I3, I2 / I3)")
+    try:
+        check_inertia([k[0], k[1], 1.0])
+    except Error as e:
+        raise Error(f"invalid inertia_ratios = {k.tolist()}: {str(e).split(': ', 1)[-1]}") from None
+    q0 = principal_spin(p, [0.0], body_axis=body_axis)[0]
+    omega0 = np.zeros(3)
+    omega0[body_axis] = p[2]
+    return np.concatenate([_quat_to_rotvec(q0), omega0, k])
 
 
 # ---------------------------------------------------------------------- geometry
@@ -872,7 +913,7 @@ def fit_spin(
     n_starts : int, optional
         Local refinements from the best grid points (principal). Default 8.
     starts : array_like, optional
-        (S, 8) starting parameters (tumbling; required there) or (S, 4) extra starts
+        (S, 8) starting parameters (tumbling; required there: :func:`tumbling_start`) or (S, 4) extra starts
         (principal).
     max_evals : int, optional
         Likelihood evaluations per local refinement. Default 2000.
