@@ -42,6 +42,7 @@ MODULES = [
     "pprender.inverse.fit",
     "pprender.inverse.so3",
     "pprender.inverse.speckle",
+    "pprender.inverse.tumble",
     "pprender.mesh",
     "pprender.materials",
     "pprender.models",

@@ -14,7 +14,9 @@
 * :mod:`~pprender.inverse.speckle`: laser speckle statistics (degrees of freedom, Wishart
   sampling of correlated channels, the negative binomial likelihood);
 * :mod:`~pprender.inverse.fit`: likelihood, nlopt and emcee fits (imported on first use:
-  it loads scipy's spatial module).
+  it loads scipy's spatial module);
+* :mod:`~pprender.inverse.tumble`: tumbling targets: torque-free propagation, per-pulse
+  light time and aberration, spin-state fits (imported on first use, like ``fit``).
 
 The modules are also importable at their earlier paths (``pprender.instrument``, ...),
 which are the same module objects.
@@ -24,12 +26,15 @@ from __future__ import annotations
 
 from . import atmosphere, classify, database, detector, distributed, instrument, so3, speckle
 
-__all__ = ["atmosphere", "classify", "database", "detector", "distributed", "fit", "instrument", "so3", "speckle"]
+__all__ = [
+    "atmosphere", "classify", "database", "detector", "distributed", "fit", "instrument", "so3", "speckle",
+    "tumble",
+]
 
 
 def __getattr__(name: str) -> object:
-    if name == "fit":
+    if name in ("fit", "tumble"):
         import importlib
 
-        return importlib.import_module(".fit", __name__)
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
