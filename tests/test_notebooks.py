@@ -29,6 +29,7 @@ EXPECTED = [
     "03_classification",
     "04_fitting",
     "05_speed_vs_accuracy",
+    "06_receiver_statistics",
 ]
 
 
