@@ -411,7 +411,13 @@ class ForwardModel:
         finite-difference Fisher information is wrong (docs/fit-smoothness.md measures
         both). ``"lidar"`` renders with the ``lidar``'s own
         settings; a :class:`pprender.Settings` is used as given. Settings with sampled
-        coverage and a free attitude or scale warn (:class:`FitWarning`).
+        coverage and a free attitude or scale warn (:class:`FitWarning`). Simulated data
+        for a fit: render the truth as the model does (``pprender.render(scene,
+        model.lidar, attitudes, settings=model.settings)``, or take :meth:`expected` at
+        the truth): a plain ``render`` with the sensor's sampled
+        coverage differs from the analytic one by up to about 1 % of the signal at a few
+        dozen pixels across the target (0.85 % on a 1U box at resolution 32), which biases
+        a high-SNR fit by that much.
     alpha_step : float or None, optional
         With ``alpha`` free: the expected counts at any ``alpha`` are the Catmull-Rom
         interpolation (C1, exact for quadratics in ``ln alpha``) of those rendered with
