@@ -134,6 +134,21 @@ def test_measurement_with_speckle_saves_and_loads(tmp_path) -> None:
     np.testing.assert_array_equal(back2.speckle_dof, m2.speckle_dof)
 
 
+def test_files_with_the_new_fields_are_format_2_and_refused_by_a_version_1_reader() -> None:
+    """A measurement with speckle is written as format 2, which a pprender reading up to
+    version 1 refuses with "newer pprender" (instead of failing on unknown instrument
+    fields); one without speckle, detector or atmosphere stays format 1."""
+    from pprender import _io
+
+    plain = ins.measure(PROFILE, _inst(), bin_edges=EDGES, seed=1).to_xarray()
+    assert plain.attrs["format"] == "pprender.Measurement/1"
+    ds = ins.measure(PROFILE, _inst(speckle=Speckle(dof=3.0)), bin_edges=EDGES, seed=1).to_xarray()
+    assert ds.attrs["format"] == "pprender.Measurement/2"
+    with pytest.raises(pprender.Error, match="newer pprender"):
+        _io.check_format(ds.attrs, "Measurement", 1, "file")
+    assert ins.Measurement.from_xarray(ds).instrument.speckle == Speckle(dof=3.0)
+
+
 # ---------------------------------------------------------------------- illuminated area
 
 

@@ -138,8 +138,10 @@ class PileUpWarning(UserWarning):
 
 
 #: Version of the saved layout (:meth:`Measurement.to_xarray`); files of a newer version
-#: are refused.
-FORMAT_VERSION = 1
+#: are refused. Version 2 adds the instrument's ``speckle``, ``detector`` and
+#: ``atmosphere`` and the ``speckle_dof`` variable; a measurement without them is still
+#: written as version 1, which earlier pprender versions read.
+FORMAT_VERSION = 2
 
 # Largest mean numpy's Poisson sampler accepts (int64 counts; its limit is 9.2234e18).
 _POISSON_MAX = 9.2e18
@@ -957,7 +959,8 @@ class Measurement:
           ``range, channel``), ``background`` (``range, channel``), in counts; with
           speckle only, ``speckle_dof`` (as ``counts``, float64);
         * attributes (a saved file adds ``created``, UTC): ``format``
-          (``pprender.Measurement/1``), ``pprender_version``,
+          (``pprender.Measurement/1``, or ``/2`` with a speckle, detector or atmosphere:
+          :data:`FORMAT_VERSION`), ``pprender_version``,
           ``wavelength`` (m, the instrument's), and as JSON text ``instrument`` (every
           :class:`Instrument` field, its :class:`Channels` in full), ``seed`` and
           ``extra``.
@@ -1023,8 +1026,10 @@ class Measurement:
         if self.speckle_dof is not None:  # only with speckle: other files keep their layout
             data_vars["speckle_dof"] = _io.variable(dims, self.speckle_dof, {
                 "units": "1", "long_name": "marginal speckle degrees of freedom of each count (inf: none)"})
+        inst = self.instrument
+        plain = inst.speckle is None and inst.detector is None and inst.atmosphere is None and self.speckle_dof is None
         attrs = _io.base_attrs(
-            "Measurement", FORMAT_VERSION, "pprender measurement",
+            "Measurement", 1 if plain else FORMAT_VERSION, "pprender measurement",
             "SI units; counts are detected photo-electrons; link budget and channels as in "
             "pprender.instrument (its module docstring)",
         )
