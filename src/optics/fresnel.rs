@@ -43,8 +43,16 @@ pub fn fresnel_amplitudes(cos_theta_i: f64, eta: Eta) -> (C64, C64) {
             if ds == C64::new(0.0, 0.0) || dp == C64::new(0.0, 0.0) {
                 return (C64::new(0.0, 0.0), C64::new(0.0, 0.0));
             }
-            let rs = -eta2m1 / (ds * ds);
-            let rp = eta2m1 * (c * c * (eta2 + 1.0) - 1.0) / (dp * dp);
+            let mut rs = -eta2m1 / (ds * ds);
+            // c^2 (eta^2 + 1) - 1 = c^2 eta^2 - sin^2: no cancellation where eta is small
+            // (it cancelled to 1.5e-14 above 1 in |rp|^2 under total internal reflection,
+            // eta = 0.014 at 0.125 rad: tests/test_extremes.py)
+            let mut rp = eta2m1 * (c * c * eta2 - (1.0 - c) * (1.0 + c)) / (dp * dp);
+            if eta.im == 0.0 && w.re == 0.0 {
+                // total internal reflection of a real index: |rs| = |rp| = 1 exactly
+                rs /= rs.norm();
+                rp /= rp.norm();
+            }
             (rs, rp)
         }
     }
@@ -109,6 +117,30 @@ mod tests {
             let (rs, rp) = fresnel_amplitudes(1.0, Eta::Complex(eta));
             assert!((rs.norm_sqr() - r).abs() < 1e-14 * r.max(1e-300) + 1e-300);
             assert!((rp + rs).norm() < 1e-14, "rp = -rs at normal incidence");
+        }
+    }
+
+    #[test]
+    fn total_internal_reflection_is_lossless_and_never_above_one() {
+        // hypothesis found |rp|^2 = 1 + 1.5e-14 at eta = 0.014, 0.125 rad (tests/test_extremes.py);
+        // now within a few ulp of 1
+        for n in [0.014061841145298952, 1e-3, 0.1, 0.5, 0.9, 0.999] {
+            let crit = (1.0f64 - n * n).sqrt(); // cos of the critical angle
+            for i in 0..=2000 {
+                let c = i as f64 / 2000.0;
+                let (rs, rp) = fresnel_amplitudes(c, Eta::new(n, 0.0));
+                let (a, b) = (rs.norm_sqr(), rp.norm_sqr());
+                assert!(
+                    a <= 1.0 + 1e-15 && b <= 1.0 + 1e-15,
+                    "n {n}, c {c}: {a} {b}"
+                );
+                if c < crit {
+                    assert!(
+                        (a - 1.0).abs() <= 1e-15 && (b - 1.0).abs() <= 1e-15,
+                        "n {n}, c {c}: {a} {b}"
+                    );
+                }
+            }
         }
     }
 

@@ -397,3 +397,35 @@ fn rank_deficient_and_near_polarizer() {
         assert!(err < 1e-5, "eps={eps} err={err}");
     }
 }
+
+#[test]
+fn cloude_eigenvalues_ignore_subnormal_noise() {
+    // The single-term BRDF of m = 0, eta = 0.1 at wi theta 1, azimuth 7.47e-300, wo = n
+    // (tests/test_extremes.py, found by hypothesis): a pure matrix whose frame left
+    // subnormal off-diagonal elements. The eigensolver returned -4.4e-10 M00 for it.
+    let mut m = [[0.0; 4]; 4];
+    m[0][0] = 0.10332708211196062;
+    m[1][1] = 0.10332708211196062;
+    m[2][2] = -0.054181134688168535;
+    m[3][3] = -0.054181134688168535;
+    m[2][3] = -0.08798233084929265;
+    m[3][2] = 0.08798233084929265;
+    m[0][1] = 5.73580528e-17;
+    m[1][0] = 5.73580528e-17;
+    m[1][2] = 2.50620886e-316;
+    m[1][3] = -2.33372669e-316;
+    m[2][0] = 8.79662144e-318;
+    m[2][1] = -6.72984010e-317;
+    m[3][0] = -1.42844408e-317;
+    m[3][1] = -3.35774562e-316;
+    m[0][2] = -1.67757520e-317;
+    let ev = cloude_eigenvalues(&m).unwrap();
+    assert!(ev[3] >= -1e-15 * m[0][0], "{ev:?}");
+    assert!((ev.iter().sum::<f64>() - m[0][0]).abs() < 1e-15);
+    // the same at any scale (the power-of-two scaling is exact)
+    for s in [1e-300, 1e300] {
+        let ms = m.map(|r| r.map(|x| x * s));
+        let es = cloude_eigenvalues(&ms).unwrap();
+        assert!(es[3] >= -1e-15 * ms[0][0], "{s}: {es:?}");
+    }
+}
