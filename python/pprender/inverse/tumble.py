@@ -844,7 +844,7 @@ def _spin_angle_grid(
         lam = lam.reshape(len(p), n_angles, n_pulse, -1)
         if lam.shape[-1] != k.shape[1] or not np.all(np.isfinite(lam)) or np.any(lam < 0):
             raise Error("invalid forward: expected counts of the wrong shape, non-finite or < 0")
-        like.evaluations += len(p) * n_angles * n_pulse
+        like.evaluations += len(p) * n_angles  # per pulse: one candidate's worth of T attitudes per angle
         for j in range(len(p)):
             log_lam = xlogy(1.0, np.maximum(lam[j], 1e-300))  # (n_angles, n_pulse, C); log(0) guarded
             if telescope is None:
