@@ -28,6 +28,19 @@ over the table's directions is ``S`` with ``S / sqrt(S + B) = --snr`` and backgr
 about the line of sight (also reported: the roll-invariant score, the angle between axis
 and line of sight only).
 
+Moving line of sight (``--sweep DEG``, writes docs/spin-recovery-pass.md): the line of
+sight turns uniformly by ``DEG`` about inertial ``+y`` over the observation (``+z`` at
+mid-pass, telescope ``up = +y``; :func:`sweep_geometry`), the same truths (the fixed study's
+random stream is kept). The fit has three stages: the fixed-line-of-sight fit above at the
+mid-pass line of sight (angle between axis and line of sight, rate); that fit's optima
+turned about the mid-pass line of sight (``--n-rolls``), tilted (``--tilts``) and corrected
+for the sweep, scored with the pass geometry; BOBYQA with the pass geometry from the best
+``--n-refine`` (``fit_spin(geometry=..., n_starts=0, starts=...)``). Scored without any
+symmetry and modulo the half turn about the sweep axis (what a roll-invariant profile of
+a mirror-symmetric target still cannot see: the page explains). About 30 s per truth::
+
+    python scripts/spin_recovery.py --sweep 45 --truths 30
+
 Full run (about 25 min on 2 loaded cores: the table 5 min, 30 s per truth)::
 
     python scripts/spin_recovery.py --truths 30
@@ -295,6 +308,7 @@ def run_pass(args: argparse.Namespace, *, commit: str, rng: np.random.Generator,
     n_sweep = np.array([0.0, 1.0, 0.0])
     l_m = g.line_of_sight[mid]
     tilts = tuple(float(x) for x in args.tilts.split(","))
+    windows = tuple(float(x) for x in args.windows.split(","))
     like_batch = 64
 
     def report() -> None:
@@ -367,8 +381,12 @@ def run_pass(args: argparse.Namespace, *, commit: str, rng: np.random.Generator,
             f"- Fit (three stages, all in the table's model): (1) the fixed-line-of-sight fit of the "
             f"fixed study at the mid-pass line of sight ({axes.shape[0]} hemisphere axes x "
             f"{args.n_rates} rates x {args.n_phases} phases read off per-axis spin-angle tables, BOBYQA "
-            f"from the {args.n_starts} best): it finds the angle between axis and line of sight and the "
-            f"rate; (2) its best (up to 2 distinct) optima turned about the mid-pass line of sight by "
+            f"from the {args.n_starts} best) on the pulses of windows about mid-pass of "
+            f"{', '.join(f'{x:g}' for x in windows)} of the pass (a shorter window sweeps less, so a fixed "
+            f"line of sight models it better where the line of sight's azimuth about the axis turns fast): "
+            f"it finds the angle between axis and line of sight and the "
+            f"rate; (2) each window's best (up to 3 distinct, within 50 in log-likelihood) optima turned about "
+            f"the mid-pass line of sight by "
             f"{args.n_rolls} angles, axes tilted by {', '.join(f'{x:g}' for x in tilts)} deg toward the "
             f"line of sight, spin angle corrected for the sweep (`alpha(t) = alpha_1(t) + psi(t) - "
             f"psi(t_m)`, `psi` the line of sight's azimuth about the candidate axis, fitted by a line), "
@@ -401,6 +419,8 @@ def run_pass(args: argparse.Namespace, *, commit: str, rng: np.random.Generator,
         q_fixed = tumble.principal_spin(truth, times0, body_axis=1)
         rng.poisson(expected_counts(target.render(q_fixed), inst, bin_edges=table.edges) if args.truth == "render"
                     else table(q_fixed))
+        if i < args.start:
+            continue
         if args.truth == "render":
             lam = expected_counts(target.render(g.attitudes(q_truth)), inst, bin_edges=table.edges)
         else:
@@ -411,17 +431,24 @@ def run_pass(args: argparse.Namespace, *, commit: str, rng: np.random.Generator,
         mirror_info = kl(table, g, q_truth, mirror_image(q_truth, n_sweep, 0))
         snr_pulse = np.sum(lam - table.background, axis=(1, 2)) / np.sqrt(np.sum(lam, axis=(1, 2)))
         t0 = time.perf_counter()
-        # stage 1: a fixed line of sight at mid-pass (the mid-pass telescope frame as the inertial one)
-        fit1 = tumble.fit_spin(counts, table, times, rate_bounds=rate_bounds, body_axis=1, axes=axes,
-                               n_rates=args.n_rates, n_phases=args.n_phases, n_starts=args.n_starts)
+        # stage 1: a fixed line of sight at mid-pass (the mid-pass telescope frame as the inertial one), on
+        # the whole pass and on windows about mid-pass (less sweep: a better fixed-line-of-sight model
+        # where the line of sight's azimuth about the axis turns fast)
         keep: list[np.ndarray] = []
-        for c, ll in zip(fit1.candidates, fit1.candidate_log_likelihoods):
-            cone = math.acos(abs(math.cos(c[0])))
-            if ll < fit1.log_likelihood - 30 or len(keep) == 2:
-                break
-            if all(abs(cone - math.acos(abs(math.cos(k[0])))) > math.radians(2) or abs(c[2] / k[2] - 1) > 0.01
-                   for k in keep):
-                keep.append(c)
+        for frac in windows:
+            n_w = max(8, int(round(frac * times.size)))
+            sl = slice(max(0, mid - n_w // 2), max(0, mid - n_w // 2) + n_w)
+            fit1 = tumble.fit_spin(counts[sl], table, times[sl], rate_bounds=rate_bounds, body_axis=1, axes=axes,
+                                   n_rates=args.n_rates, n_phases=args.n_phases, n_starts=args.n_starts)
+            kept: list[np.ndarray] = []
+            for c, ll in zip(fit1.candidates, fit1.candidate_log_likelihoods):
+                cone = math.acos(abs(math.cos(c[0])))
+                if ll < fit1.log_likelihood - 50 or len(kept) == 3:
+                    break
+                if all(abs(cone - math.acos(abs(math.cos(k[0])))) > math.radians(2) or abs(c[2] / k[2] - 1) > 0.01
+                       for k in kept):
+                    kept.append(c)
+            keep += kept
         # stage 2: the roll family about the mid-pass line of sight, corrected for the sweep
         cands = np.vstack([ring_candidates(c, g, times, mid, 1, args.n_rolls, tilts) for c in keep])
         like = tumble._Likelihood(counts.astype(float), table, g)
@@ -480,6 +507,10 @@ def main() -> None:
     ap.add_argument("--n-rolls", type=int, default=72, help="(--sweep) stage-2 turns about the line of sight")
     ap.add_argument("--tilts", default="-4,0,4", help="(--sweep) stage-2 axis tilts toward the line of sight (deg)")
     ap.add_argument("--n-refine", type=int, default=4, help="(--sweep) stage-3 BOBYQA starts")
+    ap.add_argument("--start", type=int, default=0,
+                    help="(--sweep) first truth to fit (the earlier ones are drawn, not fitted)")
+    ap.add_argument("--windows", default="1,0.34",
+                    help="(--sweep) stage-1 windows about mid-pass, fractions of the pulses")
     ap.add_argument("--out", type=Path, default=None,
                     help="default docs/spin-recovery.md, docs/spin-recovery-pass.md with --sweep")
     args = ap.parse_args()

@@ -77,6 +77,16 @@ What a monostatic profile cannot see (scored by :func:`spin_error`):
   angle between axis and line of sight (``roll_invariant=True``); a mirror-symmetric
   target seen in intensity also cannot tell ``omega`` from ``-omega``
   (``reversible=True``).
+
+A moving line of sight (a pass: :func:`pulse_geometry` with the positions along it) sees
+the rotations about any one line of sight, which no longer map the geometry onto itself.
+What remains, when the lines of sight lie in one plane (normal ``n``, e.g. a short pass),
+for a target with a mirror plane and a profile that is roll invariant and its own mirror
+image (intensity only, or the convex single-bounce ``sigma diag(1, 1, -1, -1)``; a mirror
+flips the signs of ``U`` and ``V``): the motion reflected across that plane with the body
+reflected across its own mirror plane shows the same body-frame lines of sight and
+profiles, and its angular velocity is ``rot(n, pi) omega``: score with
+``spin_error(..., line_of_sight=n)`` (``scripts/spin_recovery.py --sweep``).
 """
 
 from __future__ import annotations
