@@ -299,6 +299,94 @@ def test_fit_with_a_geometry_matches_the_fixed_frame_fit(rng) -> None:
     assert tumble.spin_error(0.68 * tumble._axis_from_angles(1.0, 0.7), fixed.omega)[0] < 5.0
 
 
+def _sweep_geometry(n_t, sweep_deg):
+    # A line of sight turning uniformly by sweep_deg about +y (across it) over the pulses,
+    # +z at mid-pass; up = +y, so the telescope turns with it.
+    beta = math.radians(sweep_deg) * (np.arange(n_t) / (n_t - 1) - 0.5)
+    los = np.stack([np.sin(beta), np.zeros(n_t), np.cos(beta)], -1)
+    return tumble.pulse_geometry(np.linspace(0.0, 10.0, n_t, endpoint=False), -1.0e6 * los, up=[0.0, 1.0, 0.0])
+
+
+def test_per_pulse_grid_matches_the_candidate_by_candidate_grid_on_a_pass(rng) -> None:
+    # A moving line of sight (60 deg): the grid read off per-pulse spin-angle tables
+    # (n_angles 48 < 8 x 8) and the grid evaluating every candidate (n_angles 64 = 8 x 8)
+    # must land on the same optimum after BOBYQA (1e-3 deg, 1e-6 relative in the rate), and
+    # that optimum on the truth (axis within 2 deg, rate within 1 %, no symmetry allowed:
+    # the roll harmonics see the roll and the sweep breaks the half turn about the line of sight).
+    g = _sweep_geometry(30, 60.0)
+
+    def forward(q):
+        return _synthetic_forward(q, signal=3000.0)
+
+    truth = [1.1, 2.5, 0.66, 1.0]
+    omega = 0.66 * tumble._axis_from_angles(1.1, 2.5)
+    counts = rng.poisson(forward(g.attitudes(tumble.principal_spin(truth, g.reflect_times))))
+    kw = dict(geometry=g, rate_bounds=(0.5, 0.8), n_axes=60, n_rates=8, n_phases=8, n_starts=3)
+    tables = tumble.fit_spin(counts, forward, g.reflect_times, n_angles=48, **kw)
+    brute = tumble.fit_spin(counts, forward, g.reflect_times, n_angles=64, **kw)
+    assert tables.evaluations < brute.evaluations
+    assert math.degrees(math.acos(min(1.0, tables.omega @ brute.omega / np.linalg.norm(tables.omega)
+                                      / np.linalg.norm(brute.omega)))) < 1e-3
+    assert tumble.spin_error(brute.omega, tables.omega)[1] < 1e-6
+    axis_err = math.degrees(math.acos(min(1.0, omega @ tables.omega / np.linalg.norm(omega)
+                                          / np.linalg.norm(tables.omega))))
+    assert axis_err < 2.0 and tumble.spin_error(omega, tables.omega)[1] < 0.01, axis_err
+
+
+def test_a_moving_line_of_sight_leaves_only_the_half_turn_about_the_sweep_axis(rng) -> None:
+    # A roll-invariant forward model (the body-frame line of sight only, like a convex
+    # single-bounce target; even in each body axis, like a mirror-symmetric one). Along a
+    # fixed line of sight every turn about it gives the same data; along a 60 deg sweep only
+    # the reflection across the sweep plane (with a body reflection) does, whose angular
+    # velocity is omega turned by a half turn about the sweep axis n = +y. Checked on the
+    # expected counts (exact, 1e-9 relative), then the fit (1e5 signal counts per pulse:
+    # three roll-invariant bins carry little) recovers the axis modulo that half turn
+    # (within 3 deg) and the rate (1 %).
+    def forward(q):
+        return _synthetic_forward(q, signal=1e5)[:, :3]
+
+    n_t = 30
+    g = _sweep_geometry(n_t, 60.0)
+    t = g.reflect_times
+    truth = [1.1, 2.5, 0.66, 1.0]
+    omega = 0.66 * tumble._axis_from_angles(1.1, 2.5)
+    q = tumble.principal_spin(truth, t)
+    turn = tumble.quaternion_multiply(_axis_angle([0, 0, 1], 1.0), q)  # 57 deg about the mid-pass line of sight
+    assert np.allclose(forward(turn), forward(q), rtol=1e-9)  # fixed line of sight: identical
+    lam = forward(g.attitudes(q))
+    assert np.max(np.abs(forward(g.attitudes(turn)) / lam - 1)) > 0.05  # the sweep sees it
+    # the mirror image S R M (S: reflection across the sweep plane y = 0, M: body x -> -x)
+    s_mat, m_mat = np.diag([1.0, -1.0, 1.0]), np.diag([-1.0, 1.0, 1.0])
+    from scipy.spatial.transform import Rotation
+
+    image = Rotation.from_matrix(s_mat @ _matrix(q) @ m_mat).as_quat(scalar_first=True)
+    assert np.allclose(forward(g.attitudes(image)), lam, rtol=1e-9)
+    steps = Rotation.from_matrix(_matrix(image[1:]) @ np.swapaxes(_matrix(image[:-1]), -1, -2)).as_rotvec()
+    assert np.allclose(steps / np.diff(t)[:, None], [-omega[0], omega[1], -omega[2]], atol=1e-9)  # rot(y, pi) omega
+    counts = rng.poisson(lam)
+    fit = tumble.fit_spin(counts, forward, t, geometry=g, rate_bounds=(0.5, 0.8), n_axes=60, n_rates=8, n_phases=8,
+                          n_angles=48, n_starts=3)
+    axis_err, rate_err = tumble.spin_error(omega, fit.omega, line_of_sight=[0.0, 1.0, 0.0])
+    assert axis_err < 3.0 and rate_err < 0.01, (axis_err, rate_err)
+
+
+def test_refining_given_starts_only() -> None:
+    # n_starts=0 with starts: no grid, so the evaluations are BOBYQA's alone (<= max_evals
+    # per start) and a start at the truth of near noise-free data ends at least as likely and
+    # within 1e-3 of its rate.
+    t = np.linspace(0.0, 10.0, 20, endpoint=False)
+    truth = np.array([1.0, 0.7, 0.68, 2.0])
+    counts = np.round(_synthetic_forward(tumble.principal_spin(truth, t), signal=1e6))
+    fit = tumble.fit_spin(counts, _synthetic_forward, t, rate_bounds=(0.5, 0.8), n_starts=0, starts=truth,
+                          max_evals=50)
+    assert fit.starts == 1 and fit.evaluations <= 50
+    like = tumble._Likelihood(counts, _synthetic_forward, None)
+    assert fit.log_likelihood >= like(tumble.principal_spin(truth, t)[None])[0]
+    assert tumble.spin_error(0.68 * tumble._axis_from_angles(1.0, 0.7), fit.omega)[1] < 1e-3
+    with pytest.raises(pprender.Error, match="n_starts"):
+        tumble.fit_spin(counts, _synthetic_forward, t, rate_bounds=(0.5, 0.8), n_starts=0)
+
+
 def test_tumbling_fit_refines_from_a_nearby_start(rng) -> None:
     # Near noise-free data (1e6 signal counts per pulse, rounded): from a start 3 % off in
     # every parameter, BOBYQA (400 evaluations) climbs within 1 of the truth's

@@ -77,6 +77,16 @@ What a monostatic profile cannot see (scored by :func:`spin_error`):
   angle between axis and line of sight (``roll_invariant=True``); a mirror-symmetric
   target seen in intensity also cannot tell ``omega`` from ``-omega``
   (``reversible=True``).
+
+A moving line of sight (a pass: :func:`pulse_geometry` with the positions along it) sees
+the rotations about any one line of sight, which no longer map the geometry onto itself.
+What remains, when the lines of sight lie in one plane (normal ``n``, e.g. a short pass),
+for a target with a mirror plane and a profile that is roll invariant and its own mirror
+image (intensity only, or the convex single-bounce ``sigma diag(1, 1, -1, -1)``; a mirror
+flips the signs of ``U`` and ``V``): the motion reflected across that plane with the body
+reflected across its own mirror plane shows the same body-frame lines of sight and
+profiles, and its angular velocity is ``rot(n, pi) omega``: score with
+``spin_error(..., line_of_sight=n)`` (``scripts/spin_recovery.py --sweep``).
 """
 
 from __future__ import annotations
@@ -810,34 +820,49 @@ def _spin_angle_grid(
     n_angles: int,
     n_starts: int,
     batch: int,
+    telescope: np.ndarray | None = None,
 ) -> np.ndarray:
     """Best (rate, phase) grid point of each of the ``n_starts`` best axes, (S, 4).
 
-    The expected counts of axis ``a`` at spin angle ``alpha`` are tabulated once
-    (``n_angles`` angles); a candidate's pulse ``t`` reads the angle nearest
-    ``phase + rate t``, so its log-likelihood is ``sum_t G[t, i_t] - F[i_t]`` with
-    ``G = k log(lam)^T`` and ``F = sum lam`` over the table.
+    For axis ``a`` the attitude at pulse ``t`` depends on the spin angle
+    ``alpha = phase + rate t`` only (and, with a ``telescope`` rotation per pulse, on the
+    pulse): the expected counts ``lam[t, alpha]`` are tabulated once at ``n_angles``
+    angles (once for all pulses without a telescope, per pulse with one); a candidate's
+    pulse ``t`` reads the angle nearest ``phase + rate t``, so its log-likelihood is
+    ``sum_t G[t, i_t]`` with ``G[t, i] = k_t . log(lam[t, i]) - sum lam[t, i]``.
     """
     alpha = np.arange(n_angles) * 2.0 * math.pi / n_angles
     k = like.k.reshape(t.size, -1)
     ang = phases[None, :, None] + rates[:, None, None] * t[None, None, :]  # (R, P, T)
     idx = np.rint(ang / (2.0 * math.pi / n_angles)).astype(np.int64) % n_angles
     rows = np.arange(t.size)
-    per_axis = max(1, batch * t.size // n_angles)
+    # about batch * T forward evaluations per call, as the candidate-by-candidate grid
+    per_call = batch * t.size
+    n_pulse = 1 if telescope is None else t.size
+    per_axis = max(1, per_call // (n_angles * n_pulse))
     best = []
     for i0 in range(0, polar.size, per_axis):
         p = np.column_stack([polar[i0 : i0 + per_axis], azim[i0 : i0 + per_axis]])
         p = np.column_stack([p, np.ones(len(p)), np.zeros(len(p))])
         q = _principal(p, alpha, body_axis)  # (A, n_angles, 4)
-        lam = np.asarray(like.forward(q.reshape(-1, 4)), dtype=np.float64).reshape(len(p), n_angles, -1)
+        if telescope is not None:
+            q = quaternion_multiply(telescope[None, None, :, :], q[:, :, None, :])  # (A, n_angles, T, 4)
+        q = q.reshape(-1, 4)
+        lam = np.concatenate(
+            [np.asarray(like.forward(q[i : i + per_call]), dtype=np.float64) for i in range(0, q.shape[0], per_call)]
+        )
+        lam = lam.reshape(len(p), n_angles, n_pulse, -1)
         if lam.shape[-1] != k.shape[1] or not np.all(np.isfinite(lam)) or np.any(lam < 0):
             raise Error("invalid forward: expected counts of the wrong shape, non-finite or < 0")
-        like.evaluations += len(p) * n_angles
+        like.evaluations += len(p) * n_angles  # per pulse: one candidate's worth of T attitudes per angle
         for j in range(len(p)):
-            g = k @ xlogy(1.0, np.maximum(lam[j], 1e-300)).T  # (T, n_angles); log(0) guarded
-            g = np.where(np.isfinite(g), g, -1e300)
-            f = lam[j].sum(axis=1)  # (n_angles,)
-            ll = (g[rows, idx] - f[idx]).sum(axis=-1)  # (R, P)
+            log_lam = xlogy(1.0, np.maximum(lam[j], 1e-300))  # (n_angles, n_pulse, C); log(0) guarded
+            if telescope is None:
+                g = k @ log_lam[:, 0, :].T  # (T, n_angles)
+            else:
+                g = np.einsum("tc,atc->ta", k, log_lam)
+            g = np.where(np.isfinite(g), g, -1e300) - lam[j].sum(axis=-1).T  # (T, n_angles)
+            ll = g[rows, idx].sum(axis=-1)  # (R, P)
             r, ph = np.unravel_index(int(np.argmax(ll)), ll.shape)
             best.append((float(ll[r, ph]) - like.lgk, p[j, 0], p[j, 1], rates[r], phases[ph]))
     best.sort(key=lambda b: -b[0])
@@ -871,12 +896,16 @@ def fit_spin(
     ``rate_bounds``) x ``n_phases`` phases is evaluated, then nlopt's BOBYQA refines the
     best grid point of each of the ``n_starts`` best axes; the grid spacing in rate should
     keep the phase error at the last pulse below ~1 rad
-    (``(rate_max - rate_min) * duration / n_rates <~ 1``). Without a ``geometry`` (a fixed
-    telescope frame) the attitude of a principal-axis spin depends on ``phase + rate t``
-    only, so the grid stage renders each axis once at ``n_angles`` spin angles and reads
-    every (rate, phase) candidate's pulses off that table (nearest angle): its cost is
-    ``n_axes * n_angles`` forward evaluations, whatever ``n_rates`` and ``n_phases``. With a
-    geometry every candidate is evaluated (``n_axes * n_rates * n_phases * T``).
+    (``(rate_max - rate_min) * duration / n_rates <~ 1``). For one axis the attitude of a
+    principal-axis spin at a pulse depends on ``phase + rate t`` only, so the grid stage
+    tabulates each axis's expected counts at ``n_angles`` spin angles and reads every
+    (rate, phase) candidate's pulses off that table (nearest angle). Without a
+    ``geometry`` (a fixed telescope frame) one table serves every pulse: the cost is
+    ``n_axes * n_angles`` forward evaluations, whatever ``n_rates`` and ``n_phases``. With
+    a geometry (a moving line of sight) the table is per pulse, ``n_axes * n_angles * T``,
+    used when ``n_angles < n_rates * n_phases``; otherwise every candidate is evaluated
+    (``n_axes * n_rates * n_phases * T``). ``n_starts=0`` with ``starts`` skips the grid
+    and refines the given starts only (e.g. candidates from a cheaper fixed-frame fit).
     General tumbling (8 parameters) is refined from ``starts`` (e.g. a principal fit's
     attitude and ``rate * e`` with a few inertia ratios).
 
@@ -908,10 +937,11 @@ def fit_spin(
         sphere (principal): e.g. a hemisphere when a symmetry maps it onto the other half
         (a half turn about the line of sight does, :func:`spin_error`).
     n_angles : int, optional
-        Spin-angle samples per axis of the grid stage without a geometry (principal), in
+        Spin-angle samples per axis (and per pulse with a geometry) of the grid stage (principal), in
         [8, 1e5]. Default 360.
     n_starts : int, optional
-        Local refinements from the best grid points (principal). Default 8.
+        Local refinements from the best grid points (principal), in [0, 1e4]; 0 (with
+        ``starts``): no grid, only the given starts are refined. Default 8.
     starts : array_like, optional
         (S, 8) starting parameters (tumbling; required there: :func:`tumbling_start`) or (S, 4) extra starts
         (principal).
@@ -945,7 +975,7 @@ def fit_spin(
         raise Error(f"invalid model = {model!r}: 'principal' or 'tumbling'")
     if body_axis not in (0, 1, 2) or isinstance(body_axis, bool):
         raise Error(f"invalid body_axis = {body_axis!r}: 0, 1 or 2")
-    n_starts = _positive_int(n_starts, "n_starts", 1, 10_000)
+    n_starts = _positive_int(n_starts, "n_starts", 0, 10_000)
     max_evals = _positive_int(max_evals, "max_evals", 1, 10_000_000)
     batch = _positive_int(batch, "batch", 1, 1_000_000)
     like = _Likelihood(k.reshape((t.size, -1)), lambda q: np.asarray(forward(q)).reshape(q.shape[0], -1), geometry)
@@ -968,6 +998,8 @@ def fit_spin(
         n_rates = _positive_int(n_rates, "n_rates")
         n_phases = _positive_int(n_phases, "n_phases")
         n_angles = _positive_int(n_angles, "n_angles", 8, 100_000)
+        if n_starts == 0 and extra is None:
+            raise Error("invalid n_starts = 0: give starts to refine, or n_starts >= 1 for the grid")
         if axes is None:
             axes = _fibonacci_sphere(_positive_int(n_axes, "n_axes"))
         else:
@@ -984,8 +1016,12 @@ def fit_spin(
         azim = np.arctan2(axes[:, 1], axes[:, 0])
         rates = rb[0] + (np.arange(n_rates) + 0.5) * (rb[1] - rb[0]) / n_rates
         phases = np.arange(n_phases) * 2.0 * math.pi / n_phases
-        if geometry is None:
-            top = _spin_angle_grid(like, polar, azim, rates, phases, t, body_axis, n_angles, n_starts, batch)
+        telescope = None if geometry is None else np.asarray(geometry.telescope, dtype=np.float64)
+        if n_starts == 0:
+            top = np.empty((0, 4))
+        elif telescope is None or n_angles < n_rates * n_phases:
+            top = _spin_angle_grid(like, polar, azim, rates, phases, t, body_axis, n_angles, n_starts, batch,
+                                   telescope)
         else:
             grid = np.stack(np.meshgrid(np.arange(n_axes), rates, phases, indexing="ij"), axis=-1).reshape(-1, 3)
             idx = grid[:, 0].astype(int)
