@@ -69,7 +69,7 @@ import numpy as np
 from scipy.special import betaln, gammaln, kve, xlogy
 
 from .._core import Error
-from .detector import _array, _number
+from .detector import _array, _number, _pulses
 
 __all__ = [
     "MIN_ELEVATION_DEG",
@@ -463,19 +463,8 @@ class Atmosphere:
         return np.where(zero, np.where(kk > 0, -np.inf, 0.0), out)
 
     def _groups(self, c: int, pulses: Any, groups: Any) -> tuple[np.ndarray, np.ndarray]:
-        p = _array(pulses, "pulses")
-        if p.ndim == 0:
-            p = np.full(c, float(p))
-        if p.shape != (c,) or not np.all(np.isfinite(p)) or np.any(p <= 0):
-            raise Error(f"invalid pulses: {c} finite values > 0 (pulses per channel), got shape {p.shape}")
-        if self.scintillation != "none":
-            r = np.round(p)
-            if np.any(np.abs(p - r) > 1e-9 * np.maximum(r, 1.0)) or np.any(r < 1):
-                raise Error(
-                    f"invalid pulses = {p.tolist()}: scintillation acts pulse by pulse, so each channel needs a "
-                    "whole number (>= 1) of pulses (n_pulses * pulse_share)"
-                )
-            p = r
+        p = _pulses(pulses, c, self.scintillation != "none",
+                    "scintillation acts pulse by pulse, so each channel needs a whole number (>= 1) of pulses")
         if groups is None:
             g = np.zeros(c, dtype=np.int64)
         else:

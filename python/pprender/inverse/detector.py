@@ -219,7 +219,10 @@ def _lam_array(value: Any, name: str) -> np.ndarray:
     return a
 
 
-def _pulses(pulses: Any, c: int, whole: bool) -> np.ndarray:
+def _pulses(pulses: Any, c: int, whole: bool,
+            why: str = "a dead-time detector needs a whole number (>= 1) of pulses per channel") -> np.ndarray:
+    """Pulses per channel (C,), finite and > 0; with ``whole``, whole numbers (``why`` says
+    why in the error)."""
     p = _array(pulses, "pulses")
     if p.ndim == 0:
         p = np.full(c, float(p))
@@ -229,8 +232,7 @@ def _pulses(pulses: Any, c: int, whole: bool) -> np.ndarray:
         r = np.round(p)
         if np.any(np.abs(p - r) > 1e-9 * np.maximum(r, 1.0)) or np.any(r < 1):
             raise Error(
-                f"invalid pulses = {p.tolist()}: a dead-time detector needs a whole number (>= 1) of pulses "
-                "per channel (n_pulses * pulse_share)"
+                f"invalid pulses = {p.tolist()}: {why} (n_pulses * pulse_share)"
             )
         p = r
     return p
