@@ -191,6 +191,17 @@ class Table:
 ROLLS_DEG = (10, 30, 60, 90, 120, 150)
 
 
+def draw_truth(rng: np.random.Generator, nominal: float) -> tuple[np.ndarray, np.ndarray]:
+    """A random principal-axis truth (axis polar angle, azimuth, rate, phase): axis uniform
+    on the sphere, rate 0.8-1.25 x ``nominal``, phase uniform; and the axis (3,). The fixed
+    and the moving line-of-sight studies draw their truths with this, in the same order."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    rate = nominal * rng.uniform(0.8, 1.25)
+    phase = rng.uniform(0, 2 * math.pi)
+    return np.array([math.acos(axis[2]), math.atan2(axis[1], axis[0]), rate, phase]), axis
+
+
 def roll_information(table: Table, q: np.ndarray, roll_deg: float) -> float:
     """Expected log-likelihood ratio (noise-free, the table's model) of a motion against the
     same motion turned by ``roll_deg`` about the line of sight: the KL divergence
@@ -409,11 +420,8 @@ def run_pass(args: argparse.Namespace, *, commit: str, rng: np.random.Generator,
 
     rows: list[tuple] = []
     for i in range(args.truths):
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        rate = nominal * rng.uniform(0.8, 1.25)
-        phase = rng.uniform(0, 2 * math.pi)
-        truth = np.array([math.acos(axis[2]), math.atan2(axis[1], axis[0]), rate, phase])
+        truth, axis = draw_truth(rng, nominal)
+        rate = float(truth[2])
         q_truth = tumble.principal_spin(truth, times, body_axis=1)
         # the fixed study's counts, drawn only to keep its random stream: the same truths
         q_fixed = tumble.principal_spin(truth, times0, body_axis=1)
@@ -650,11 +658,8 @@ def main() -> None:
 
     rows: list[tuple] = []
     for i in range(args.truths):
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        rate = nominal * rng.uniform(0.8, 1.25)
-        phase = rng.uniform(0, 2 * math.pi)
-        truth = np.array([math.acos(axis[2]), math.atan2(axis[1], axis[0]), rate, phase])
+        truth, axis = draw_truth(rng, nominal)
+        rate = float(truth[2])
         q_truth = tumble.principal_spin(truth, times, body_axis=1)
         if args.truth == "render":
             lam = expected_counts(target.render(q_truth), inst, bin_edges=table.edges)
