@@ -433,8 +433,11 @@ class ConeRule:
 
 
 _MATS: Dict[Tuple[float, complex, str, Optional[int]], Optional[Dict[str, pprender.Material]]] = {}
-# The terms add up (single + double == (single, double) to rounding), so 3+ is sdm - s - d.
-TERM_SETS = {"s": ("single",), "d": ("double",), "sdm": ("single", "double", "multiple")}
+# The terms add up, so order 1 is sdm - dm and 3+ is dm - d. Not s alone: with
+# orders="surface" the single term's masking is calibrated to the bank's order 1 with the
+# multiple term's energy balance (Surface::calibrate_masking), which a single-term material
+# (no banks) does not have; dm has the same calibration as sdm.
+TERM_SETS = {"d": ("double",), "dm": ("double", "multiple"), "sdm": ("single", "double", "multiple")}
 
 
 def model_materials(alpha: float, eta: complex, mode: str,
@@ -463,10 +466,10 @@ def model_values(cell: Cell, mode: str, s: Settings) -> Optional[Dict[str, np.nd
         mat = mats[name]
         return ConeRule.get(wi, wos, s.cone, rule).average(lambda a, b: pprender.brdf(mat, a, b))
 
-    s_f = avg("s", FINE)
+    s_f = avg("sdm", FINE) - avg("dm", FINE)
     rule = COARSE if mode == "seed" else SURFACE_RULE
-    s_c, d_c, sdm_c = (avg(n, rule) for n in ("s", "d", "sdm"))
-    return {"m": np.stack([s_f, d_c, sdm_c - s_c - d_c, s_f + (sdm_c - s_c)])}
+    d_c, dm_c = (avg(n, rule) for n in ("d", "dm"))
+    return {"m": np.stack([s_f, d_c, dm_c - d_c, s_f + dm_c])}
 
 
 # ----------------------------------------------------------------------------- scoring
@@ -770,7 +773,9 @@ def page(res: Dict[str, Any], argv: Sequence[str], cells_requested: Sequence[Cel
       f"projected cost exceeds the cap of {s.max_rays:.1e} rays per cell. Seeds: {SEED_BASE:.0e} + crc32(cell) x "
       "1e5 + call: none of the path banks' (seed 1, own streams) nor of the development scripts'.")
     a("- Model: `pprender.Material(\"beckmann\", alpha, eta, coherent_backscatter=False, orders=...)`; order 1 = "
-      "terms (single,), order 2 = (double,), 3+ = (single, double, multiple) - (single,) - (double,), whole = (single, "
+      "terms (single, double, multiple) - (double, multiple) (with `orders=\"surface\"` the single term's masking is "
+      "calibrated to the bank's order 1 along with the banks), order 2 = (double,), 3+ = (double, multiple) - "
+      "(double,), whole = (single, "
       'double, multiple). `orders="surface"` exists for alpha in [0.3, 1] only (n/a elsewhere)'
       + (f"; path banks of {s.bank_rays:.0e} rays per incidence node" if s.bank_rays else
          "; path banks at their default size") + ".")

@@ -2,7 +2,8 @@
 // DepolarizingParams::eval in src/brdf/table.rs, through BrdfTable::eval_masked) ----
 // The material's words at `blk` (SingleParams::words): kind 0, distribution kind and m or
 // alpha, perfect-conductor flag, n - 1 and k, the masking-excess table (scale, correlation
-// kind, intervals, values). All vectors are in the telescope frame.
+// kind, intervals, values), then the calibration table in the same z (intervals, 0 for
+// none, and values; G s(theta_i) s(theta_o): Surface::calibrate_masking). All vectors are in the telescope frame.
 // Uses the shade kernel's `tables` binding and ELEMENT_MASK, table.wgsl (z_of, table_1d)
 // and microfacet.wgsl.
 
@@ -60,7 +61,14 @@ fn add_single_in_kernel(blk: u32, g: Local, wi: vec3<f32>, wo: vec3<f32>, x_in: 
     }
     let p_i = ci * qi;
     let p_o = co * qo;
-    let g_ci = (1.0 - f) * p_i * qo + f * select(qo, p_i / co, p_i <= p_o);
+    var g_ci = (1.0 - f) * p_i * qo + f * select(qo, p_i / co, p_i <= p_o);
+    let cal = blk + 10u + bitcast<u32>(tables[blk + 8u]);
+    let n_cal = bitcast<u32>(tables[cal]);
+    if (n_cal > 0u) {
+        let scale = tables[blk + 6u];
+        g_ci *= table_1d(cal + 1u, n_cal, z_of(scale, ci, si))
+            * table_1d(cal + 1u, n_cal, z_of(scale, co, so));
+    }
     let r = fresnel_rs_rp(clamp(dot(wi, h), 0.0, 1.0), tables[blk + 4u], tables[blk + 5u],
                           bitcast<u32>(tables[blk + 3u]) != 0u);
     let rs = r.xy;

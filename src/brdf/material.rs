@@ -1,6 +1,7 @@
 //! [`Material`]: a validated [`MaterialSpec`] on its [`Surface`], with the tables the
 //! terms need derived from them (albedos, escape after a bounce).
 
+use super::bank::{N_THETA, THETA_STEP};
 use super::orders::{Part, SurfaceOrders};
 use super::spec::Orders;
 pub use super::spec::{MaterialSpec, Term, Terms};
@@ -302,6 +303,14 @@ impl Material {
             s_fresnel: None,
             surface_orders,
         };
+        // the surface's order 1 (`Surface::calibrate_masking`), before any table reads the
+        // masking
+        if let Some(so) = mat.surface_orders.clone() {
+            if mat.spec.shadowing != Shadowing::None {
+                let target: Vec<f64> = (0..N_THETA).map(|k| so.order1_target(k)).collect();
+                mat.surface.calibrate_masking(THETA_STEP, &target);
+            }
+        }
         if let Some(step) = mat.spec.alpha_step {
             if let Some(nodes) = alpha_nodes(&mat.spec, step)? {
                 mat.interpolate_tables(&nodes);

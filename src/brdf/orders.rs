@@ -67,6 +67,10 @@ struct NodeTables {
     fresnel: [Vec<f64>; 2],
     /// The same with `F = 1`.
     white: [Vec<f64>; 2],
+    /// Per incidence node, the bank's order-1 albedo and its fraction still on the surface
+    /// after [`MAX_ORDER`] reflections (`F = 1`, counted over all primary rays).
+    order1: Vec<f64>,
+    truncated: Vec<f64>,
 }
 
 /// The banks kept, by `(node, rays)`, oldest first.
@@ -226,6 +230,8 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
         rest,
         fresnel,
         white,
+        order1: b.albedo.iter().map(|a| a[0]).collect(),
+        truncated: b.truncated.clone(),
     });
     tables()
         .lock()
@@ -251,6 +257,10 @@ pub struct SurfaceOrders {
     pub rest: Option<OrderTable>,
     fresnel: [Vec<f64>; 2],
     white: [Vec<f64>; 2],
+    /// Per incidence node, the bank's order-1 albedo and truncated fraction (`F = 1`),
+    /// linear in alpha between the nodes.
+    order1: Vec<f64>,
+    truncated: Vec<f64>,
 }
 
 /// Which part's albedo.
@@ -308,6 +318,8 @@ impl SurfaceOrders {
                 rest: a.rest.clone(),
                 fresnel: a.fresnel.clone(),
                 white: a.white.clone(),
+                order1: a.order1.clone(),
+                truncated: a.truncated.clone(),
             });
         }
         let b = node_tables(key(k0 + 1), eta)?;
@@ -337,12 +349,38 @@ impl SurfaceOrders {
                     .collect::<Vec<f64>>()
             })
         };
+        let lin = |x: &[f64], y: &[f64]| -> Vec<f64> {
+            x.iter()
+                .zip(y)
+                .map(|(&u, &v)| (1.0 - w) * u + w * v)
+                .collect()
+        };
         Ok(SurfaceOrders {
             double,
             rest,
             fresnel,
             white,
+            order1: lin(&a.order1, &b.order1),
+            truncated: lin(&a.truncated, &b.truncated),
         })
+    }
+
+    /// The white (`F = 1`) albedo the single term is calibrated to at incidence node `k`
+    /// ([`crate::brdf::surface::Surface::calibrate_masking`]): with the multiple term, what
+    /// the banks' orders (with `F = 1`, as their tables hold them) and the fraction past
+    /// [`MAX_ORDER`] leave of the incident light, so that the depolarizing remainder carries
+    /// only that fraction; without it, the bank's counted order-1 albedo.
+    pub fn order1_target(&self, k: usize) -> f64 {
+        if self.rest.is_some() {
+            1.0 - self.white[0][k] - self.white[1][k] - self.truncated[k]
+        } else {
+            self.order1[k]
+        }
+    }
+
+    /// The bank's counted order-1 albedo (`F = 1`) at incidence node `k`.
+    pub fn order1_counted(&self, k: usize) -> f64 {
+        self.order1[k]
     }
 
     /// The albedo of `part` at incidence cosine `c` (unpolarized), with the material's

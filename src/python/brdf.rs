@@ -97,7 +97,14 @@ mod material_args {
 ///     depolarizing multiple term) or "surface" (Beckmann only, alpha in [0.3, 1]: the
 ///     paths of Gaussian-correlated surfaces, src/brdf/bank.rs; "double" is order 2,
 ///     "multiple" the orders beyond the enabled ones, polarized, plus a depolarizing
-///     remainder that closes the energy balance). Against the explicit surface, order 2
+///     remainder that closes the energy balance). The single term's masking is then
+///     calibrated to the traced surface's order 1, G s(theta_i) s(theta_o) with s(theta)
+///     1.00-1.05 (its white albedo equals the surface's at every incidence node, where
+///     APS/Smith masking is 0.5-5% low, most at grazing), so the remainder carries only
+///     the light past 8 reflections; without it the remainder stood for that order-1
+///     light and made orders 3+ too strong and depolarized. So the single term of such a
+///     material differs from that of Material(terms=("single",)) by those few per cent.
+///     Against the explicit surface, order 2
 ///     is within 0.92-1.16 where the double term is 0.27-2.75 (CHANGELOG, issue 24). Its
 ///     path banks (one per alpha node 0.3, 0.4, ..., 1.0 and ``bank_rays``) are traced
 ///     on first use, once per machine (about a minute per node on 2 cores at the default

@@ -228,3 +228,109 @@ fn the_cache_directory() {
     let d = check_cache_dir(Path::new("not/yet/there")).unwrap();
     assert!(d.is_absolute() && d.ends_with("not/yet/there"));
 }
+
+/// The single term's masking is calibrated to the surface's order 1
+/// ([`crate::brdf::surface::Surface::calibrate_masking`]): its white albedo equals the
+/// target at every incidence node (to the calibration's tolerance, 1e-6, plus the
+/// quadrature's: 2e-6); the target (what the banks' orders >= 2 leave) is the bank's
+/// counted order-1 albedo to the tables' own albedo error.
+#[test]
+fn single_term_is_calibrated_to_the_surfaces_order_one() {
+    for (alpha, double) in [(0.8, true), (0.75, true), (0.75, false), (0.3, true)] {
+        let t0 = std::time::Instant::now();
+        let mat = material(alpha, Eta::PerfectConductor, double);
+        let dt = t0.elapsed().as_secs_f64();
+        let so = mat.surface_orders.as_ref().unwrap();
+        assert!(mat.calibration.is_some());
+        let mut worst = 0.0f64;
+        let mut worst_target = 0.0f64;
+        for k in 0..N_THETA {
+            let c = (k as f64 * THETA_STEP).cos();
+            let e = crate::brdf::albedo::single_albedo(&mat, c, false, 128);
+            let t = so.order1_target(k);
+            worst = worst.max((e / t - 1.0).abs());
+            worst_target = worst_target.max((t - so.order1_counted(k)).abs());
+            if k % 6 == 0 || k == N_THETA - 1 {
+                eprintln!(
+                    "alpha {alpha} double {double} k {k}: E1 {e:.5} target {t:.5} counted {:.5}",
+                    so.order1_counted(k)
+                );
+            }
+        }
+        eprintln!(
+            "alpha {alpha}: worst {worst:.2e} target-counted {worst_target:.2e} build {dt:.2}s"
+        );
+        assert!(worst < 2e-6, "alpha {alpha}: {worst}");
+    }
+}
+
+/// Orders 3+ of the material (the banks' orders 3-8 plus the depolarizing remainder)
+/// against the explicit surface (other surfaces and rays): aluminium at alpha 0.8, 30 deg
+/// incidence, exit along the normal, where before the single term was calibrated the
+/// remainder carried the single term's deficit against the surface's order 1 and the
+/// material's 3+ was 1.45x the surface's (docs/surface-orders-reference.md of commit
+/// `1584104`, row gau/al/30/in30) and depolarized (DI 0.26 against 0.38). Tolerance: 3
+/// of the reference's standard errors plus 15% for the 200,000-ray bank's noise (its
+/// exit node at the pole pools about 300 paths of order 3+); DI within 0.1 (the issue's
+/// target).
+#[test]
+fn material_orders_three_and_up_match_the_explicit_surface() {
+    use crate::brdf::terms::double_term;
+    use crate::reference::{run, Config, Surface as RefSurface};
+    let eta = Eta::Complex(C64::new(1.3763, 10.2449));
+    let mut spec = MaterialSpec::new(Distribution::Beckmann { alpha: 0.8 }, eta);
+    spec.terms = Terms {
+        single: false,
+        double: true,
+        multiple: true,
+        diffuse: false,
+    };
+    spec.orders = crate::brdf::spec::Orders::Surface;
+    spec.coherent_backscatter = false;
+    spec.bank_rays = 200_000;
+    let mat = Material::new(spec).unwrap();
+    let t = 30f64.to_radians();
+    let (wi, wo) = (V3::new(t.sin(), 0.0, t.cos()), V3::new(0.0, 0.0, 1.0));
+    let (dm, d) = (
+        eval(&mat, wi, wo, Frame::Sp),
+        double_term(&mat, wi, wo, Frame::Sp),
+    );
+    let m: Mat4 = std::array::from_fn(|i| std::array::from_fn(|j| dm[i][j] - d[i][j]));
+    let out = run(&Config {
+        wi,
+        wo: vec![wo],
+        eta,
+        surface: RefSurface::Gaussian {
+            alpha: 0.8,
+            grid: 256,
+            correlation_length: 8.0,
+        },
+        rays: 3_000_000,
+        cone: 0.2,
+        max_order: 12,
+        frame: Frame::Sp,
+        seed: 2024,
+        batches: 24,
+        coherent: None,
+    })
+    .unwrap();
+    let (r, se) = (out.mueller[2][0][0], out.stderr[2][0][0]);
+    let di = |m: &Mat4| {
+        let sum: f64 = m.iter().flatten().map(|x| x * x).sum();
+        ((sum - m[0][0] * m[0][0]) / (3.0 * m[0][0] * m[0][0]))
+            .max(0.0)
+            .sqrt()
+    };
+    let (di_model, di_ref) = (di(&m), di(&out.mueller[2]));
+    eprintln!(
+        "3+ material {} surface {r} +- {se}; DI {di_model} vs {di_ref}",
+        m[0][0]
+    );
+    assert!(se < 0.05 * r, "{r} +- {se}");
+    assert!(
+        (m[0][0] - r).abs() < 3.0 * se + 0.15 * r,
+        "material {} vs surface {r} +- {se}",
+        m[0][0]
+    );
+    assert!((di_model - di_ref).abs() < 0.1, "DI {di_model} vs {di_ref}");
+}

@@ -108,6 +108,9 @@ pub struct SingleParams {
     pub eta: Eta,
     pub correlation: Correlation,
     pub excess: ZTable,
+    /// The masking's calibration `s` to a traced surface (`G s(theta_i) s(theta_o)`,
+    /// [`crate::brdf::surface::Surface::calibrate_masking`]), if any.
+    pub calibration: Option<ZTable>,
 }
 
 impl SingleParams {
@@ -128,6 +131,7 @@ impl SingleParams {
             eta: mat.spec.eta,
             correlation: mat.correlation,
             excess,
+            calibration: mat.calibration.clone(),
         }
     }
 
@@ -141,7 +145,10 @@ impl SingleParams {
         let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
         let so = (wo[0] * wo[0] + wo[1] * wo[1]).sqrt();
         let n = |c: f64, s: f64| self.excess.eval(c, s).max(0.0);
-        let g = masking_from_excess(self.correlation, wi, wo, si, so, n(ci, si), n(co, so));
+        let mut g = masking_from_excess(self.correlation, wi, wo, si, so, n(ci, si), n(co, so));
+        if let Some(t) = &self.calibration {
+            g *= t.eval(ci, si) * t.eval(co, so);
+        }
         single_mueller(&self.distribution, self.eta, wi, wo, g, bases)
     }
 
@@ -172,7 +179,8 @@ impl SingleParams {
     /// `[0 (the kind; u32 bits), distribution (0 Blinn-Phong, 1 Beckmann, 2 GGX; u32
     /// bits), m or alpha, perfect conductor (u32 bits), n - 1, k, excess table scale,
     /// correlation (0 none, 1 seed, 2 APS; u32 bits), intervals of the excess table (u32
-    /// bits), its n + 1 values]`. `n - 1` is rounded from f64, so that `eta` near 1 keeps its relative
+    /// bits), its n + 1 values, intervals of the calibration table (u32 bits; 0: none),
+    /// its values (in the same `z`)]`. `n - 1` is rounded from f64, so that `eta` near 1 keeps its relative
     /// accuracy in `eta^2 - 1 = (n - 1 + i k)(n + 1 + i k)`.
     pub fn words(&self) -> Vec<f32> {
         let u = |x: u32| f32::from_bits(x);
@@ -203,6 +211,14 @@ impl SingleParams {
             u((v.len() - 1) as u32),
         ];
         w.extend(v.iter().map(|&x| x as f32));
+        match &self.calibration {
+            Some(t) => {
+                debug_assert_eq!(t.scale, self.excess.scale);
+                w.push(u((t.values.len() - 1) as u32));
+                w.extend(t.values.iter().map(|&x| x as f32));
+            }
+            None => w.push(u(0)),
+        }
         w
     }
 }
