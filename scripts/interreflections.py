@@ -2,7 +2,8 @@
 
 ``python scripts/interreflections.py`` prints markdown tables and writes them to
 ``docs/interreflections.md`` (``--quick`` runs a small version and writes nothing; the
-tests run it). The Mitsuba numbers are read from the committed references
+tests run it; ``--section 3`` runs section 3 alone and replaces it in the committed page).
+The Mitsuba numbers are read from the committed references
 (``benchmarks/mitsuba_corners.py --write docs/data/mitsuba-corners.json``, and for the
 CubeSat ``benchmarks/mitsuba_cubesat.py --write docs/data/mitsuba-cubesat.json`` where it
 exists), so this script needs no Mitsuba. Sections:
@@ -27,6 +28,7 @@ exists), so this script needs no Mitsuba. Sections:
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -278,8 +280,33 @@ def what_bounces_add(quick: bool) -> list[str]:
     return rows
 
 
-def main(quick: bool = False) -> str:
+SECTIONS = {1: corners, 2: cubesat_vs_mitsuba, 3: noise_and_cost, 4: what_bounces_add}
+
+
+def replace_sections(text: str, new: dict[int, list[str]]) -> str:
+    """``text`` (the docs page) with each section ``k`` of ``new`` in place of its own: from
+    its ``## k.`` heading to the next ``## `` heading or the closing ``pprender`` line."""
+    lines = text.split("\n")
+    for k, body in sorted(new.items()):
+        start = next(i for i, line in enumerate(lines) if line.startswith(f"## {k}."))
+        end = next((i for i in range(start + 1, len(lines))
+                    if lines[i].startswith("## ") or lines[i].startswith("pprender ")), len(lines))
+        lines[start:end] = body
+    return "\n".join(lines)
+
+
+def main(quick: bool = False, sections: tuple[int, ...] = (1, 2, 3, 4)) -> str:
+    """Run ``sections`` (all by default) and return their markdown; unless ``quick``, write
+    docs/interreflections.md: the whole page, or with some sections only, those sections
+    replaced in the committed page (the others, and its closing line, kept)."""
     t = time.perf_counter()
+    new = {k: SECTIONS[k](quick) for k in sorted(set(sections))}
+    if set(new) != set(SECTIONS):
+        text = "\n".join(line for body in new.values() for line in body)
+        if not quick:
+            page = ROOT / "docs/interreflections.md"
+            page.write_text(replace_sections(page.read_text(), new))
+        return text
     lines = ["# Inter-reflections: validation, noise and cost", "",
              "Written by `python scripts/interreflections.py` (its docstring says what each section "
              "measures). pprender traces paths of 2 and 3 bounces on the CPU in f64 for every backend "
@@ -289,10 +316,8 @@ def main(quick: bool = False) -> str:
              "scripts/corner_co_cross.py --write`); where the light goes (a cavity's energy balance, "
              "the trihedral's effective area) in [corner-energy.md](corner-energy.md) (`python "
              "scripts/corner_energy.py --write`).", ""]
-    lines += corners(quick)
-    lines += cubesat_vs_mitsuba(quick)
-    lines += noise_and_cost(quick)
-    lines += what_bounces_add(quick)
+    for body in new.values():
+        lines += body
     lines += [f"pprender {pprender.__version__}, {time.perf_counter() - t:.0f} s.", ""]
     text = "\n".join(lines)
     if not quick:
@@ -301,4 +326,9 @@ def main(quick: bool = False) -> str:
 
 
 if __name__ == "__main__":
-    print(main(quick="--quick" in sys.argv[1:]))
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a small version; writes nothing")
+    parser.add_argument("--section", type=int, action="append", choices=sorted(SECTIONS),
+                        help="run only this section (repeatable) and replace it in the committed page")
+    args = parser.parse_args()
+    print(main(quick=args.quick, sections=tuple(args.section or SECTIONS)))

@@ -30,6 +30,7 @@ pub(super) fn render_rows(
     let tx_seed = hash32(setup.sensor.paths.seed ^ TX_SALT);
     let ext = setup.lay.ext;
     let (wi, wo) = (setup.wi, setup.wo);
+    let mut mirror_cdf: Vec<f64> = Vec::with_capacity(mirrors.list.len());
     for row in rows.clone() {
         for col in 0..w {
             let pixel = (row * w + col) as u32;
@@ -95,12 +96,15 @@ pub(super) fn render_rows(
                         1
                     };
                     let base_weight = weight;
+                    // the mirrors that may light `v`, for the aimed 3-bounce paths
+                    // (none: `mirror_cdf` empty, no aimed path and no aiming density)
+                    let aimable = order == 1 && mirrors.choose_from(&v, &mut mirror_cdf);
                     for k in 0..split {
                         let weight = base_weight / split as f64;
                         let j = i * split + k;
                         let (mut t, mut x_t, mut length) = (t, x_t, length);
                         'draw: {
-                            if order == 1 && !mirrors.list.is_empty() {
+                            if aimable {
                                 // a 3-bounce path aimed from `v` at a mirror of the transmitter
                                 let aimed = aim(
                                     setup,
@@ -110,6 +114,7 @@ pub(super) fn render_rows(
                                     &v,
                                     w_out,
                                     &lobes,
+                                    &mirror_cdf,
                                     rng.set(j, 3),
                                 );
                                 if let Some(((m, x_m), x_in, r3)) = aimed {
@@ -179,7 +184,7 @@ pub(super) fn render_rows(
                                     }
                                 } else if order == 1 && setup.strategies.aim {
                                     // a 3-bounce path is also aimed at a mirror from `v`
-                                    let b = mirrors.density(&next, w_next, wi);
+                                    let b = mirrors.density(&mirror_cdf, &next, w_next, wi);
                                     p / (p + b)
                                 } else {
                                     1.0
