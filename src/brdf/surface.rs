@@ -9,6 +9,10 @@ use crate::microfacet::{seed, Correlation, Distribution, MaskingEval, Shadowing,
 /// Gauss-Legendre order of the albedo quadratures of [`Surface::calibrate_masking`] (that of
 /// the material's albedo tables, so the two agree).
 pub const CALIBRATION_ORDER: usize = super::material::ALBEDO_ORDER;
+/// The cheaper rule and the tolerance [`Surface::calibrate_masking`] reaches with it
+/// before it goes on with [`CALIBRATION_ORDER`].
+const CALIBRATION_ORDER_FIRST: usize = 48;
+const CALIBRATION_TOL_FIRST: f64 = 3e-5;
 /// Relative tolerance of [`Surface::calibrate_masking`] on each node's albedo.
 pub const CALIBRATION_TOL: f64 = 1e-6;
 /// History kept by the Anderson acceleration of [`Surface::calibrate_masking`].
@@ -151,12 +155,12 @@ impl Surface {
             ZTable::build(scale, TABLE_NODES, |theta| at(theta).exp())
         };
         // the fixed-point map's step: half the log of target / E at each node
-        let step_of = |surf: &Surface| -> (Vec<f64>, f64) {
+        let step_of = |surf: &Surface, order: usize| -> (Vec<f64>, f64) {
             let e: Vec<f64> = (0..n)
                 .into_par_iter()
                 .map(|k| {
                     let c = (k as f64 * step).cos();
-                    super::albedo::single_albedo(surf, c, false, CALIBRATION_ORDER)
+                    super::albedo::single_albedo(surf, c, false, order)
                 })
                 .collect();
             let worst = target
@@ -175,52 +179,61 @@ impl Surface {
         // move light between small and large angles barely change the albedos)
         let mut x = vec![0.0; n];
         self.calibration = Some(table_of(&x));
-        let (mut f, mut worst) = step_of(self);
-        let mut hist: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
         let mut iterations = 0;
-        while worst > CALIBRATION_TOL && iterations < CALIBRATION_ITERATIONS {
-            iterations += 1;
-            let plain: Vec<f64> = x.iter().zip(&f).map(|(a, b)| a + b).collect();
-            let mut next = plain.clone();
-            if !hist.is_empty() {
-                // gamma = argmin |f - dF gamma| (normal equations, slightly regularized)
-                let k = hist.len();
-                let mut a = nalgebra::DMatrix::<f64>::zeros(k, k);
-                let mut r = nalgebra::DVector::<f64>::zeros(k);
-                for i in 0..k {
-                    for j in 0..k {
-                        a[(i, j)] = hist[i].1.iter().zip(&hist[j].1).map(|(p, q)| p * q).sum();
+        let mut worst = f64::INFINITY;
+        // first with a cheap rule (7 times fewer evaluations), then with the tables' own
+        for (order, tol) in [
+            (CALIBRATION_ORDER_FIRST, CALIBRATION_TOL_FIRST),
+            (CALIBRATION_ORDER, CALIBRATION_TOL),
+        ] {
+            let mut f;
+            (f, worst) = step_of(self, order);
+            let mut hist: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
+            while worst > tol && iterations < CALIBRATION_ITERATIONS {
+                iterations += 1;
+                let plain: Vec<f64> = x.iter().zip(&f).map(|(a, b)| a + b).collect();
+                let mut next = plain.clone();
+                if !hist.is_empty() {
+                    // gamma = argmin |f - dF gamma| (normal equations, slightly regularized)
+                    let k = hist.len();
+                    let mut a = nalgebra::DMatrix::<f64>::zeros(k, k);
+                    let mut r = nalgebra::DVector::<f64>::zeros(k);
+                    for i in 0..k {
+                        for j in 0..k {
+                            a[(i, j)] = hist[i].1.iter().zip(&hist[j].1).map(|(p, q)| p * q).sum();
+                        }
+                        r[i] = hist[i].1.iter().zip(&f).map(|(p, q)| p * q).sum();
                     }
-                    r[i] = hist[i].1.iter().zip(&f).map(|(p, q)| p * q).sum();
-                }
-                let tr = (0..k).map(|i| a[(i, i)]).sum::<f64>() / k as f64;
-                for i in 0..k {
-                    a[(i, i)] += 1e-10 * tr;
-                }
-                if let Some(g) = a.cholesky().map(|ch| ch.solve(&r)) {
-                    for (i, (dx, df)) in hist.iter().enumerate() {
-                        for (v, (p, q)) in next.iter_mut().zip(dx.iter().zip(df)) {
-                            *v -= g[i] * (p + q);
+                    let tr = (0..k).map(|i| a[(i, i)]).sum::<f64>() / k as f64;
+                    for i in 0..k {
+                        a[(i, i)] += 1e-10 * tr;
+                    }
+                    if let Some(g) = a.cholesky().map(|ch| ch.solve(&r)) {
+                        for (i, (dx, df)) in hist.iter().enumerate() {
+                            for (v, (p, q)) in next.iter_mut().zip(dx.iter().zip(df)) {
+                                *v -= g[i] * (p + q);
+                            }
                         }
                     }
                 }
-            }
-            self.calibration = Some(table_of(&next));
-            let (mut f_next, mut w_next) = step_of(self);
-            if (w_next.is_nan() || w_next >= 2.0 * worst) && !hist.is_empty() {
-                // the extrapolation went astray (noisy targets): a plain step, a new history
-                hist.clear();
-                next = plain;
                 self.calibration = Some(table_of(&next));
-                (f_next, w_next) = step_of(self);
+                let (mut f_next, mut w_next) = step_of(self, order);
+                if (w_next.is_nan() || w_next >= 2.0 * worst) && !hist.is_empty() {
+                    // the extrapolation went astray (noisy targets): a plain step, a new
+                    // history
+                    hist.clear();
+                    next = plain;
+                    self.calibration = Some(table_of(&next));
+                    (f_next, w_next) = step_of(self, order);
+                }
+                let dx: Vec<f64> = next.iter().zip(&x).map(|(a, b)| a - b).collect();
+                let df: Vec<f64> = f_next.iter().zip(&f).map(|(a, b)| a - b).collect();
+                if hist.len() == ANDERSON_DEPTH {
+                    hist.remove(0);
+                }
+                hist.push((dx, df));
+                (x, f, worst) = (next, f_next, w_next);
             }
-            let dx: Vec<f64> = next.iter().zip(&x).map(|(a, b)| a - b).collect();
-            let df: Vec<f64> = f_next.iter().zip(&f).map(|(a, b)| a - b).collect();
-            if hist.len() == ANDERSON_DEPTH {
-                hist.remove(0);
-            }
-            hist.push((dx, df));
-            (x, f, worst) = (next, f_next, w_next);
         }
         Calibration { iterations, worst }
     }
