@@ -447,7 +447,7 @@ pub fn host_area_moment(
     for (k, f) in foot.chunks_exact(4).enumerate() {
         let (r0, cov) = (f[0] as f64, f[3] as f64);
         let s0 = (img[k * ch] as f64).min(cap);
-        if r0.is_nan() || !(s0 > 0.0) || !(cov > 0.0) {
+        if r0.is_nan() || s0.is_nan() || s0 <= 0.0 || cov.is_nan() || cov <= 0.0 {
             continue;
         }
         let e = s0 * s0 / (cov * pix2);
