@@ -58,6 +58,12 @@ override CHANNELS: u32 = 16u;      // 16: Mueller, 4: Stokes (M s_tx), 1: intens
 override WRITE_IMAGE: bool = true;
 override WRITE_RANGE: bool = true;
 override WRITE_PROFILE: bool = true;
+// With WRITE_PROFILE: each bin's second moment sum_q (w_q I_q)^2 / a_q over the shaded
+// parts q (I_q: the part's S0 cross-section where positive, a_q = frac_q pix^2, w_q its
+// pulse weight in the bin), one more fixed-point word pair after the bin's channels at the
+// scale fix_area (render::Rendered::area_moment; the illuminated area per bin is
+// profile_S0^2 / moment). Twin: render::cpu's Accumulator::add.
+override WRITE_AREA: bool = false;
 override WRITE_TOTAL: bool = true;
 // Footprint mode (sampled pulses, whose profile is accumulated on the host): the range
 // buffer holds (r0, a, b) per pixel, the range and the widths of its footprint.
@@ -102,6 +108,10 @@ struct Params {
     max_extent: f32,   // cap on the sub-pixel range widths (m)
     tx_width: u32,     // side of the transmitter's id map (texels; SHADOWS only)
     closed: u32,       // 1: closed mesh, back faces culled (Mesh::closed)
+    fix_area: f32,     // fixed-point units per m^2 of the area moment (WRITE_AREA)
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
     // per visibility sample (u, v, dc, dr): its offset in the pixel (from its top-left
     // corner) and, SAMPLES >= 4, the tile texel holding it relative to the pixel's (sample_id)
     offsets: array<vec4<f32>, MAX_SAMPLES>,
@@ -375,12 +385,37 @@ fn shade_at(tri: u32, layer: u32, px: f32, py: f32, out: ptr<function, array<f32
     return hit;
 }
 
+// Word pairs per bin of the profile buffer: the channels, then (WRITE_AREA) the moment.
+fn profile_stride() -> u32 {
+    return CHANNELS + select(0u, 1u, WRITE_AREA);
+}
+
+// The area moment of a part (WRITE_AREA): I^2 / a for its S0 cross-section I = g0 (0
+// where not positive) and area a = frac pix^2, in fixed-point units, clamped at frac
+// 2^61 / (pixels) so that a bin of every pixel stays below 2^61 units (only a pixel whose
+// value exceeds the tables' bound reaches it, see render::gpu::plan).
+fn area_units(g0: f32, frac: f32) -> f32 {
+    if (!WRITE_AREA || g0 <= 0.0) {
+        return 0.0;
+    }
+    let t = g0 / params.pix;
+    let cap = 2.305843e18 / f32(params.width * params.height);
+    return min(t * t / frac * params.fix_area, cap * frac);
+}
+
 // Add one shaded surface's values `v` (clamped) at range r0 with footprint widths (wa, wb)
 // to the profile of attitude `layer`: the pulse integrated over each bin, its tails beyond
 // the support folded into the end bins (weights sum to 1; twin:
-// render::pulse::bin_weights_folded).
-fn add_profile(layer: u32, r0: f32, wa: f32, wb: f32, v: ptr<function, array<f32, 16>>) {
+// render::pulse::bin_weights_folded); with WRITE_AREA, `e` (area_units) times the mean
+// over the footprint of the squared pointwise pulse weight to the bin's area moment, by the
+// two-point rule r0 +- d, d^2 = (wa^2 + wb^2) / 12 (the trapezoid's variance; twin:
+// render::cpu's Accumulator::add_moment).
+fn add_profile(layer: u32, r0: f32, wa: f32, wb: f32, v: ptr<function, array<f32, 16>>,
+               e: f32) {
     let half_w = 0.5 * (wa + wb) + params.support;
+    let d = sqrt((wa * wa + wb * wb) / 12.0);
+    var p_prev = 0.0;
+    var m_prev = 0.0;
     let lo = (r0 - half_w - params.r_min) / params.bin_width;
     let hi = (r0 + half_w - params.r_min) / params.bin_width;
     let k0 = u32(clamp(floor(lo), 0.0, f32(params.n_bins - 1u)));
@@ -394,11 +429,25 @@ fn add_profile(layer: u32, r0: f32, wa: f32, wb: f32, v: ptr<function, array<f32
         }
         let w = (c_next - c_prev) * params.fix_scale;
         c_prev = c_next;
+        let base = (layer * params.n_bins + kb) * profile_stride();
         if (w != 0.0) {
-            let base = (layer * params.n_bins + kb) * CHANNELS;
             for (var c = 0u; c < CHANNELS; c++) {
                 fixed_add(base + c, w * (*v)[c], false);
             }
+        }
+        if (WRITE_AREA && e > 0.0) {
+            var p_next = 1.0;
+            var m_next = 1.0;
+            if (kb < k1) {
+                let x = params.r_min + f32(kb + 1u) * params.bin_width - r0;
+                p_next = pulse_cdf_gauss_box2(x - d, params.sigma, 0.0, 0.0);
+                m_next = pulse_cdf_gauss_box2(x + d, params.sigma, 0.0, 0.0);
+            }
+            let wp = p_next - p_prev;
+            let wm = m_next - m_prev;
+            p_prev = p_next;
+            m_prev = m_next;
+            fixed_add(base + CHANNELS, 0.5 * (wp * wp + wm * wm) * e, false);
         }
     }
 }
@@ -438,7 +487,7 @@ fn shade_part(layer: u32, col: u32, row: u32, part: Part, cap: f32,
         g[ch] = clamp(g[ch], -cap, cap);
     }
     if (WRITE_PROFILE && g[0] != 0.0) {
-        add_profile(layer, h.x, wab.x, wab.y, &g);
+        add_profile(layer, h.x, wab.x, wab.y, &g, area_units(g[0], part.frac));
     }
 }
 
@@ -570,7 +619,7 @@ fn pixel_parts(col: u32, row: u32, layer: u32, cap: f32,
                     g[ch] = clamp((*out)[ch], -cap, cap);
                 }
                 if (WRITE_PROFILE && g[0] != 0.0) {
-                    add_profile(layer, h.x, h.y, h.z, &g);
+                    add_profile(layer, h.x, h.y, h.z, &g, area_units(g[0], 1.0));
                 }
             }
         }

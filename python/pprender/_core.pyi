@@ -298,6 +298,7 @@ class RenderRequest:
         bounces: int = 1,
         path_samples: int = 16,
         path_seed: int = 0,
+        illuminated_area: bool = False,
     ) -> RenderRequest: ...
 
 def quaternions_to_rotations(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...

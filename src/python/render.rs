@@ -56,7 +56,7 @@ impl PyRenderRequest {
         intensity_only, sigma_range, bin_width, image, range, profile, device, pulse_samples=None,
         pulse_spacing=0.0, analytic=false, n_z=None, n_psi=None, n_z_lambertian=None,
         n_psi_lambertian=None, n_z_double=None, n_psi_double=None, double_order=None,
-        in_shader=false, bounces=1, path_samples=16, path_seed=0))]
+        in_shader=false, bounces=1, path_samples=16, path_seed=0, illuminated_area=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         resolution: usize,
@@ -85,6 +85,7 @@ impl PyRenderRequest {
         bounces: usize,
         path_samples: usize,
         path_seed: u32,
+        illuminated_area: bool,
     ) -> PyResult<Self> {
         if pulse_samples.is_some() && !(pulse_spacing.is_finite() && pulse_spacing > 0.0) {
             return Err(crate::Error::param(
@@ -112,8 +113,18 @@ impl PyRenderRequest {
                 samples: path_samples,
                 seed: path_seed,
             },
+            illuminated_area,
         };
         crate::render::check_sensor(&sensor)?;
+        if illuminated_area && !profile {
+            return Err(crate::Error::param(
+                "illuminated_area",
+                true,
+                "only with the profile (profile=True): the area is the profile's S0 squared \
+                 over the moment accumulated beside it",
+            )
+            .into());
+        }
         Ok(PyRenderRequest {
             sensor,
             outputs: Outputs {
@@ -452,6 +463,10 @@ impl PyRenderScene {
         if let Some(p) = r.profile {
             let a = Array3::from_shape_vec((n, r.n_bins, c), p).expect("shape");
             d.set_item("profile", a.into_pyarray(py))?;
+        }
+        if let Some(q) = r.area_moment {
+            let a = Array2::from_shape_vec((n, r.n_bins), q).expect("shape");
+            d.set_item("area_moment", a.into_pyarray(py))?;
         }
         if !r.bounce_total.is_empty() {
             let k = r.bounce_total.len() / (n * c);

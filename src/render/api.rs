@@ -95,6 +95,10 @@ pub struct SensorSetup {
     /// Inter-reflections between parts ([`crate::render::paths`]): the bounces, paths per
     /// pixel and seed. The default renders one bounce (no paths).
     pub paths: PathSetup,
+    /// Accumulate the profile's second moment per bin beside it ([`Rendered::area_moment`],
+    /// from which the illuminated area per bin follows); with the profile only. An output
+    /// option like `intensity_only`: it changes nothing else, bit for bit.
+    pub illuminated_area: bool,
 }
 
 impl SensorSetup {
@@ -162,6 +166,15 @@ pub struct Rendered {
     pub coverage: Option<Vec<f32>>,
     /// (n, bins, channels) m^2.
     pub profile: Option<Vec<f64>>,
+    /// With [`SensorSetup::illuminated_area`]: (n, bins) m^2, per bin `j` the sum over the
+    /// shaded parts `q` of the directly lit surface (a pixel's, or its part's, shared among
+    /// surfaces) of `(w_jq I_q)^2 / a_q`: `I_q` the part's `S0` cross-section (channel 0,
+    /// where positive), `a_q` its projected area (its fraction of the pixel times
+    /// `delta^2`) and `w_jq` its pulse weight in the bin, the same as its profile's. The
+    /// illuminated area of bin `j` is `A_j = P_j^2 / Q_j` with `P_j` the single-bounce
+    /// `S0` profile (Goodman's `(int I)^2 / int I^2` of the bin's source). Inter-reflection
+    /// paths add nothing to it (they are Monte Carlo points, not areas).
+    pub area_moment: Option<Vec<f64>>,
     /// (n, channels) m^2.
     pub total: Vec<f64>,
     /// Bin edges: `r_min + k bin_width`, k = 0..=n_bins.

@@ -58,6 +58,14 @@ pub fn render(
         table_options,
     } = *request;
     gpu::check_batch(rotations)?;
+    if sensor.illuminated_area && !outputs.profile {
+        return Err(crate::Error::param(
+            "illuminated_area",
+            true,
+            "only with the profile output: the area is the profile's S0 squared over the \
+             moment accumulated beside it",
+        ));
+    }
     paths::check_paths_memory(mesh, sensor, rotations.len(), outputs)?;
     let beta = sensor.bistatic_angle;
     // with inter-reflections the backend's pass is the first half of the progress

@@ -89,6 +89,7 @@ pub fn lambert_sensor(res: usize) -> SensorSetup {
         bin_width: 0.02,
         pulse: None,
         paths: Default::default(),
+        illuminated_area: false,
     }
 }
 

@@ -1346,7 +1346,12 @@ class Speckle:
 def illuminated_area(result: Any, pulse_fwhm: Any = 100e-12) -> np.ndarray:
     """Per range bin, the effective projected area of the target that returns light in it.
 
-    From a :class:`~pprender.RenderResult` rendered with images and ranges
+    A :class:`~pprender.RenderResult` rendered with the ``"illuminated_area"`` output
+    (``outputs=("profile", "illuminated_area")``: accumulated beside the profile, no images
+    needed) carries it: :attr:`~pprender.RenderResult.illuminated_area` is returned (a
+    copy), computed with the render's own pulse and the pixels' range footprints (then
+    ``pulse_fwhm`` is not used unless it is None). Otherwise it is computed from the
+    images, as follows. From a :class:`~pprender.RenderResult` rendered with images and ranges
     (``outputs=("profile", "mueller", "range")``, or ``"stokes"``/``"intensity"`` for a
     transmitted state): pixel ``p`` has the projected area ``a_p = coverage_p
     pixel_size^2`` (on the plane normal to the line of sight), the cross-section ``I_p``
@@ -1367,11 +1372,13 @@ def illuminated_area(result: Any, pulse_fwhm: Any = 100e-12) -> np.ndarray:
     Parameters
     ----------
     result : RenderResult
-        Rendered with ``"range"`` (which also sets ``coverage``) and an image output.
+        Rendered with ``"illuminated_area"``, or with ``"range"`` (which also sets
+        ``coverage``) and an image output.
     pulse_fwhm : float or None, optional
-        The rendering Lidar's ``pulse_fwhm`` (s, in (0, 1e-6]; default 100e-12, the Lidar's
-        default). A Lidar with ``pulse_samples``: the FWHM of the Gaussian of the same
-        variance. None: bin by the pixel's range only.
+        For the image computation: the rendering Lidar's ``pulse_fwhm`` (s, in (0, 1e-6];
+        default 100e-12, the Lidar's default). A Lidar with ``pulse_samples``: the FWHM of
+        the Gaussian of the same variance. None: bin by the pixel's range only (from the
+        images, even when the result carries the render output).
 
     Returns
     -------
@@ -1381,14 +1388,22 @@ def illuminated_area(result: Any, pulse_fwhm: Any = 100e-12) -> np.ndarray:
     Raises
     ------
     pprender.Error
-        For something that is not a RenderResult, one without ``range``/``coverage`` or
-        without an image output, or a ``pulse_fwhm`` outside (0, 1e-6].
+        For something that is not a RenderResult, one without the ``"illuminated_area"``
+        output and without ``range``/``coverage`` or an image output, or a ``pulse_fwhm``
+        outside (0, 1e-6].
     """
     if not isinstance(result, RenderResult):
         raise Error(f"invalid result of type {type(result).__name__}: expected a pprender.RenderResult")
+    if pulse_fwhm is not None:
+        f = _real(pulse_fwhm, "pulse_fwhm", "a pulse FWHM in (0, 1e-6] s, or None")
+        if not 0.0 < f <= 1e-6:
+            raise Error(f"invalid pulse_fwhm = {pulse_fwhm!r}: a pulse FWHM in (0, 1e-6] s, or None")
+        if result.illuminated_area is not None:
+            return np.array(result.illuminated_area, dtype=np.float64)
     if result.range is None or result.coverage is None:
         raise Error(
-            'invalid result: no "range" image: render with outputs=("profile", "mueller", "range") to get the '
+            'invalid result: no "illuminated_area" output and no "range" image: render with '
+            'outputs=("profile", "illuminated_area") (or ("profile", "mueller", "range")) to get the '
             "illuminated area per range bin"
         )
     if result.mueller is not None:
@@ -1402,10 +1417,6 @@ def illuminated_area(result: Any, pulse_fwhm: Any = 100e-12) -> np.ndarray:
             'invalid result: no image output: render with outputs=("profile", "mueller", "range") (or "stokes" / '
             '"intensity" with a transmitted polarization)'
         )
-    if pulse_fwhm is not None:
-        f = _real(pulse_fwhm, "pulse_fwhm", "a pulse FWHM in (0, 1e-6] s, or None")
-        if not 0.0 < f <= 1e-6:
-            raise Error(f"invalid pulse_fwhm = {pulse_fwhm!r}: a pulse FWHM in (0, 1e-6] s, or None")
     edges = np.asarray(result.bin_edges, dtype=np.float64)
     n_bins = len(edges) - 1
     cov = np.asarray(result.coverage, dtype=np.float64)

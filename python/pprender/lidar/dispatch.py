@@ -176,7 +176,10 @@ def render(
     outputs : sequence of str, optional
         Any of ``"profile"``, ``"mueller"`` (needs ``polarization=None``), ``"stokes"``
         (needs a ``polarization``), ``"intensity"`` (needs ``intensity_only=True``),
-        ``"range"`` (range map and coverage); ``cross_section`` is always returned. Default
+        ``"range"`` (range map and coverage), ``"illuminated_area"`` (the effective
+        illuminated area per range bin, :attr:`RenderResult.illuminated_area`, accumulated
+        beside the profile, which it needs: the profile is computed for it and returned
+        only when asked for too); ``cross_section`` is always returned. Default
         ``("profile", "mueller", "range")``.
     device : {"auto", "cpu", "gpu"}, optional
         ``"auto"`` (default), ``"cpu"`` (lavapipe) or ``"gpu"`` (see :func:`device_info`).
@@ -278,7 +281,8 @@ def render(
         bin_width=sensor.effective_bin_width(),
         image=("mueller" in outputs or "stokes" in outputs or "intensity" in outputs),
         range="range" in outputs,
-        profile="profile" in outputs,
+        profile="profile" in outputs or "illuminated_area" in outputs,
+        illuminated_area="illuminated_area" in outputs,
         device="reference" if reference else ("twin" if st.effective_arithmetic() == "f64" else device),
         pulse_samples=None if sensor.pulse_samples is None else list(sensor.pulse_samples),
         pulse_spacing=sensor.pulse_spacing_range if sensor.sampled else 0.0,
@@ -310,9 +314,14 @@ def render(
         stage_seconds={str(k): float(v) for k, v in d["stage_seconds"].items()},
         wavelength=float(sensor.wavelength),
     )
-    if "profile" in d:
+    if "profile" in outputs:
         p = d["profile"]
         r.profile = p.reshape(n, p.shape[1], 4, 4) if mueller_out else (p[..., 0] if sensor.intensity_only else p)
+    if "area_moment" in d:
+        # A_j = P_j^2 / Q_j with P_j the single-bounce S0 profile (channel 0 in every
+        # layout; the direct part of by_bounce with inter-reflections)
+        s0 = d["bounce_profile"][:, 0, :, 0] if "bounce_profile" in d else d["profile"][..., 0]
+        r.illuminated_area = _area(s0, d["area_moment"])
     if "image" in d:
         img = d["image"]
         if mueller_out:
@@ -331,7 +340,7 @@ def render(
         by: dict[str, np.ndarray] = {
             "cross_section": bt.reshape(n, k, 4, 4) if mueller_out else (bt[..., 0] if sensor.intensity_only else bt)
         }
-        if "bounce_profile" in d:
+        if "bounce_profile" in d and "profile" in outputs:
             p = d["bounce_profile"]
             by["profile"] = (p.reshape(p.shape[:3] + (4, 4)) if mueller_out
                              else (p[..., 0] if sensor.intensity_only else p))
@@ -345,3 +354,14 @@ def render(
                 by["stokes"] = img
         r.by_bounce = by
     return r
+
+
+def _area(s0: np.ndarray, moment: np.ndarray) -> np.ndarray:
+    """The illuminated area per bin ``P^2 / Q`` from the single-bounce ``S0`` profile ``P``
+    and the area moment ``Q`` (both (N, B)); 0 where ``Q`` is 0 or ``P`` is not positive."""
+    p = np.asarray(s0, dtype=np.float64)
+    q = np.asarray(moment, dtype=np.float64)
+    out = np.zeros_like(q)
+    ok = (q > 0) & (p > 0)
+    out[ok] = p[ok] ** 2 / q[ok]
+    return out

@@ -49,6 +49,19 @@ class RenderResult:
         nothing is seen.
     coverage : numpy.ndarray or None
         (N, H, W) the covered fraction of the pixel's samples (set with ``range``).
+    illuminated_area : numpy.ndarray or None
+        (N, B) m^2, output ``"illuminated_area"``: per range bin ``j`` the effective
+        projected area of the directly lit surface that returns light in it, ``A_j =
+        (sum_q w_jq I_q)^2 / sum_q (w_jq I_q)^2 / a_q`` over the shaded surface parts ``q``
+        (a pixel, or the share of a pixel one surface covers), ``I_q`` the part's ``S0``
+        cross-section (where positive), ``a_q`` its projected area and ``w_jq`` its pulse
+        weight in the bin, the profile's own (footprint and pulse shape included). The
+        renderer accumulates the denominator beside the profile (no images needed: a
+        profile-only render gives it); the numerator is the single-bounce ``S0`` profile.
+        Goodman's effective area ``(int I)^2 / int I^2``: a flat plate seen face-on gives
+        its area in every bin its return reaches. Light reflected between parts
+        (``bounces`` > 1) is not in it. 0 where nothing returns light;
+        :func:`pprender.inverse.speckle.illuminated_area` uses it.
     table_seconds : float
         Time spent preparing the BRDF tables for this render (s; 0 for
         ``quality="reference"``).
@@ -97,6 +110,7 @@ class RenderResult:
     intensity: np.ndarray | None = None
     range: np.ndarray | None = None
     coverage: np.ndarray | None = None
+    illuminated_area: np.ndarray | None = None
     table_seconds: float = 0.0
     stage_seconds: dict[str, float] = field(default_factory=dict)
     by_bounce: dict[str, np.ndarray] | None = None
@@ -132,7 +146,8 @@ class RenderResult:
         * variables (m^2 unless said): ``cross_section`` (``attitude`` and the
           polarization dimensions: ``mueller_row, mueller_col``, ``stokes`` or none with
           ``intensity_only``), ``profile`` (``attitude, range``, polarization),
-          ``coverage`` (``attitude, row, col``, dimensionless), and the image fields
+          ``coverage`` (``attitude, row, col``, dimensionless), ``illuminated_area``
+          (``attitude, range``), and the image fields
           ``mueller``, ``stokes``, ``intensity`` and ``range`` (m) as ``mueller_image``,
           ``stokes_image``, ``intensity_image`` and ``range_image`` (``attitude, row,
           col``, ...: ``stokes`` and ``range`` are dimension names, as in
@@ -183,6 +198,7 @@ class RenderResult:
             "intensity": "lidar cross-section per pixel",
             "range": "range per pixel (mean over the covered samples; NaN where nothing is seen)",
             "coverage": "covered fraction of the pixel's samples",
+            "illuminated_area": "effective illuminated area per range bin (Goodman)",
         }
         scalars: dict[str, Any] = {}
         for fname in ("pixel_size", "extent", "table_seconds"):
@@ -389,6 +405,7 @@ def _field_dims(pol: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
         "intensity": img,
         "range": img,
         "coverage": img,
+        "illuminated_area": ("attitude", "range"),
     }
 
 
@@ -411,4 +428,4 @@ def _check_dims(a: np.ndarray, dims: tuple[str, ...], sizes: dict[str, int], nam
         raise Error(f"invalid {name}: shape {a.shape}, expected {shown}")
 
 
-_OUTPUTS = ("profile", "mueller", "stokes", "intensity", "range", "cross_section")
+_OUTPUTS = ("profile", "mueller", "stokes", "intensity", "range", "cross_section", "illuminated_area")

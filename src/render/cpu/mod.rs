@@ -256,6 +256,11 @@ pub fn add_thin_pixels(
                 *a += b;
             }
         }
+        if let (Some(q), Some(tq)) = (r.area_moment.as_mut(), t.area_moment.as_ref()) {
+            for (a, b) in q[first * r.n_bins..].iter_mut().zip(tq) {
+                *a += b;
+            }
+        }
         // output pixel of the chunk's attitude l's sub-pixel q
         let out_of =
             |l: usize, q: usize| (first + l) * res * res + (q / w / ss) * res + (q % w) / ss;
@@ -483,7 +488,7 @@ fn render_pixels(
     let threads = rayon::current_num_threads();
     let at_once = attitudes_at_once(attitude_bytes(w, sensor.samples, ch, nb, outputs), threads);
     #[allow(clippy::type_complexity)]
-    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>)> =
+    let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>, Vec<f64>)> =
         if at_once >= threads && rotations.len() >= threads {
             rotations.par_iter().map(|r| render_one(r, false)).collect()
         } else {
@@ -517,6 +522,8 @@ fn render_pixels(
             .profile
             .then(|| per.iter().flat_map(|p| p.2.iter().copied()).collect()),
         total: per.iter().flat_map(|p| p.3.iter().copied()).collect(),
+        area_moment: accumulate::area(sensor, outputs)
+            .then(|| per.iter().flat_map(|p| p.5.iter().copied()).collect()),
         r_min: lay.r_min,
         bin_width: sensor.bin_width,
         n_bins: nb,

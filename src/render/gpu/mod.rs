@@ -114,7 +114,14 @@ pub fn render_with_progress(
         &geometry,
         mesh.faces.len(),
     )?;
-    let params = ShadeParams::new(mesh, &lay, sensor, plan.fix_scale, plan.tx_width);
+    let params = ShadeParams::new(
+        mesh,
+        &lay,
+        sensor,
+        plan.fix_scale,
+        plan.fix_area,
+        plan.tx_width,
+    );
     let fix_scale = params.fix_scale as f64; // what the kernel uses
     let planned = t0.elapsed().as_secs_f64();
     let mut r = util::error_scoped(&gpu.device, || {
@@ -155,7 +162,8 @@ fn render_chunks(
     let pipeline = gpu.pipelines.shade_pipeline(dev, key)?;
     let scene = SceneBuffers::new(dev, geometry, tables, params, lay, sensor.samples);
     let c = plan.chunk.min(n);
-    let results = ResultBuffers::new(dev, plan, lay, sensor, c, fix_scale);
+    let fix_area = params.fix_area as f64; // what the kernel uses
+    let results = ResultBuffers::new(dev, plan, lay, sensor, c, fix_scale, fix_area);
     let targets = Targets::new(
         gpu,
         lay.width,
@@ -165,7 +173,15 @@ fn render_chunks(
         key.shadows.then_some(params.tx_width),
     );
     let transmitter = key.shadows.then_some(sensor.bistatic_angle);
-    let mut host = HostOutputs::new(outputs, n, sensor.resolution, plan.channels, lay.n_bins);
+    let area = outputs.profile && sensor.illuminated_area;
+    let mut host = HostOutputs::new(
+        outputs,
+        area,
+        n,
+        sensor.resolution,
+        plan.channels,
+        lay.n_bins,
+    );
     // thin parts take exact coverage with K > 1 samples and with analytic coverage
     let thinness = (sensor.samples > 1 || sensor.analytic).then(|| thin::mesh_thinness(mesh));
     let setup = t0.elapsed().as_secs_f64();

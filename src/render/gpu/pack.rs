@@ -55,6 +55,9 @@ pub struct ShadeParams {
     pub tx_width: u32,
     /// 1 for a closed mesh ([`Mesh::closed`]: back faces culled).
     pub closed: u32,
+    /// Fixed-point units per m^2 of the area moment (`WRITE_AREA`).
+    pub fix_area: f32,
+    pub _pad: [u32; 3],
     /// Per visibility sample `(u, v, dc, dr)`: its offset in the pixel ([`sample_offsets`])
     /// and, with `K >= 4`, the texel of its raster pass's tile that holds it, relative to
     /// the pixel's ([`msaa_samples`]; the first [`SensorSetup::samples`], which the kernel
@@ -72,13 +75,15 @@ pub(super) struct VisParams {
 }
 
 impl ShadeParams {
-    /// The uniform block of a render: `fix_scale` the fixed-point scale (rounded to f32
-    /// here; the kernel's is what the host divides by), `tx_width` the transmitter's map.
+    /// The uniform block of a render: `fix_scale` and `fix_area` the fixed-point scales of
+    /// the profile and the area moment (rounded to f32 here; the kernel's are what the host
+    /// divides by), `tx_width` the transmitter's map.
     pub fn new(
         mesh: &Mesh,
         lay: &Layout,
         sensor: &SensorSetup,
         fix_scale: f64,
+        fix_area: f64,
         tx_w: usize,
     ) -> Self {
         let w = lay.width;
@@ -105,6 +110,8 @@ impl ShadeParams {
             max_extent: lay.max_extent as f32,
             tx_width: tx_w as u32,
             closed: mesh.closed as u32,
+            fix_area: fix_area as f32,
+            _pad: [0; 3],
             offsets: gpu_offsets(sensor.samples),
         }
     }

@@ -34,6 +34,7 @@ pub(super) fn shade_key(plan: &Plan, sensor: &SensorSetup, tables: &GpuTables) -
         samples: sensor.samples as u32,
         analytic: sensor.analytic,
         in_shader: tables.in_shader,
+        area: kern.area,
     }
 }
 

@@ -55,6 +55,8 @@ pub(super) struct ShadeKey {
     pub(super) analytic: bool,
     /// Some material's terms are evaluated in the kernel ([`GpuTables::in_shader`]).
     pub(super) in_shader: bool,
+    /// The profile's second moment beside it ([`KernelOutputs::area`]).
+    pub(super) area: bool,
 }
 
 impl Pipelines {
@@ -335,6 +337,7 @@ impl Pipelines {
             ("WRITE_IMAGE", b(key.image)),
             ("WRITE_RANGE", b(key.range)),
             ("WRITE_PROFILE", b(key.profile)),
+            ("WRITE_AREA", b(key.area)),
             ("WRITE_TOTAL", b(key.total)),
             ("WRITE_FOOTPRINT", b(key.footprint)),
             ("SHADOWS", b(key.shadows)),

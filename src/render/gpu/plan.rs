@@ -29,6 +29,10 @@ pub struct KernelOutputs {
     pub range: bool,
     pub profile: bool,
     pub footprint: bool,
+    /// The kernel accumulates the profile's second moment as one more word pair per bin
+    /// after the channels ([`SensorSetup::illuminated_area`], with the profile on the
+    /// device); a sampled pulse's is accumulated on the host with its profile.
+    pub area: bool,
 }
 
 impl KernelOutputs {
@@ -39,7 +43,14 @@ impl KernelOutputs {
             range: outputs.range || host,
             profile: outputs.profile && !host,
             footprint: host,
+            area: outputs.profile && !host && sensor.illuminated_area,
         }
+    }
+
+    /// Fixed-point word pairs per bin of the profile buffer: the channels, and the area
+    /// moment's after them.
+    pub fn profile_stride(&self, channels: usize) -> usize {
+        channels + self.area as usize
     }
 
     /// Whether the kernel sums the total: not with the profile on the device, whose sum it
@@ -104,6 +115,8 @@ pub(super) struct Plan {
     pub chunk: usize,
     /// The fixed-point scale of the sums (before the uniform block rounds it to f32).
     pub fix_scale: f64,
+    /// The fixed-point scale of the area moment (units per m^2, likewise).
+    pub fix_area: f64,
     /// Side of the transmitter's id map ([`transmitter_map_width`]).
     pub tx_width: usize,
 }
@@ -152,7 +165,7 @@ impl Plan {
                 0
             },
             if kern.profile {
-                (lay.n_bins * channels * 8) as u64
+                (lay.n_bins * kern.profile_stride(channels) * 8) as u64
             } else {
                 0
             },
@@ -210,7 +223,18 @@ impl Plan {
         let fix_scale = (2f64.powi(40) / p_max)
             .min(2f64.powi(61) / (p_max * n_pix_internal))
             .min(f32::MAX as f64 / 4.0);
-        if !(fix_scale.is_finite() && fix_scale > 0.0) {
+        // The area moment's: a pixel adds at most q_max = p_max^2 / delta^2 over all bins
+        // (a part's I^2 / a is at most f q_max, its S0 at most p_max times its fraction f
+        // of the pixel over f delta^2, and its squared weights sum to at most 1), so every
+        // pixel's sum stays below 2^61 units. Not capped at 2^40 per pixel as the profile
+        // is (there for one atomic per addition): the moment is quadratic in the weights,
+        // and a bin at 1e-4 of the peak of a face-on plate at 2^40 was 1.5e-4 off by the
+        // rounding of its additions. The kernel clamps a part's at f 2^61 / (pixels),
+        // which only a pixel beyond the tables' bound p_max reaches (where the profile's
+        // own clamp is the guard).
+        let q_max = p_max / (lay.pix * lay.pix) * p_max;
+        let fix_area = (2f64.powi(61) / (q_max * n_pix_internal)).min(f32::MAX as f64 / 4.0);
+        if !(fix_scale.is_finite() && fix_scale > 0.0 && fix_area.is_finite() && fix_area > 0.0) {
             return Err(Error::param(
                 "materials",
                 format!("max tabulated M00 = {:e}", tables.max_m00),
@@ -223,6 +247,7 @@ impl Plan {
             channels,
             chunk,
             fix_scale,
+            fix_area,
             tx_width: tx_w,
         })
     }

@@ -18,15 +18,24 @@ pub(super) struct HostOutputs {
     range: Option<Vec<f32>>,
     coverage: Option<Vec<f32>>,
     profile: Option<Vec<f64>>,
+    area_moment: Option<Vec<f64>>,
     total: Vec<f64>,
 }
 
 impl HostOutputs {
-    /// For `n` attitudes of `res x res` pixels, `channels` channels and `nb` bins: zeros
+    /// For `n` attitudes of `res x res` pixels, `channels` channels and `nb` bins (and the
+    /// area moment with `area`): zeros
     /// (allocated zeroed, so that pages are touched only when written: every element is
     /// written by [`ResultBuffers::read_chunk`], the range NaN where nothing is seen; a
     /// NaN fill would touch every page of a large batch's range maps up front).
-    pub(super) fn new(outputs: Outputs, n: usize, res: usize, channels: usize, nb: usize) -> Self {
+    pub(super) fn new(
+        outputs: Outputs,
+        area: bool,
+        n: usize,
+        res: usize,
+        channels: usize,
+        nb: usize,
+    ) -> Self {
         HostOutputs {
             n,
             image: outputs
@@ -35,6 +44,7 @@ impl HostOutputs {
             range: outputs.range.then(|| vec![0.0f32; n * res * res]),
             coverage: outputs.range.then(|| vec![0.0f32; n * res * res]),
             profile: outputs.profile.then(|| vec![0.0f64; n * nb * channels]),
+            area_moment: area.then(|| vec![0.0f64; n * nb]),
             total: vec![0.0f64; n * channels],
         }
     }
@@ -55,6 +65,7 @@ impl HostOutputs {
             range: self.range,
             coverage: self.coverage,
             profile: self.profile,
+            area_moment: self.area_moment,
             total: self.total,
             r_min: lay.r_min,
             bin_width: sensor.bin_width,
@@ -83,8 +94,9 @@ pub(super) struct ResultBuffers<'a> {
     total_read: wgpu::Buffer,
     kern: KernelOutputs,
     channels: usize,
-    /// The fixed-point scale the kernel uses.
+    /// The fixed-point scales the kernel uses (profile, area moment).
     fix_scale: f64,
+    fix_area: f64,
     lay: &'a Layout,
     sensor: &'a SensorSetup,
 }
@@ -97,6 +109,7 @@ impl<'a> ResultBuffers<'a> {
         sensor: &'a SensorSetup,
         c: usize,
         fix_scale: f64,
+        fix_area: f64,
     ) -> Self {
         let (kern, channels) = (plan.kern, plan.channels);
         let (w, nb) = (lay.width, lay.n_bins);
@@ -119,7 +132,7 @@ impl<'a> ResultBuffers<'a> {
             16
         };
         let prof_size = if kern.profile {
-            (c * nb * channels * 8) as u64
+            (c * nb * kern.profile_stride(channels) * 8) as u64
         } else {
             16
         };
@@ -147,6 +160,7 @@ impl<'a> ResultBuffers<'a> {
             kern,
             channels,
             fix_scale,
+            fix_area,
             lay,
             sensor,
         }
@@ -158,7 +172,7 @@ impl<'a> ResultBuffers<'a> {
         let px = self.lay.width * self.lay.width;
         let img_bytes = (m * px * channels * 4) as u64;
         let rng_bytes = (m * px * 4 * self.kern.range_words()) as u64;
-        let prof_bytes = (m * nb * channels * 8) as u64;
+        let prof_bytes = (m * nb * self.kern.profile_stride(channels) * 8) as u64;
         let tot_bytes = (m * channels * 8) as u64;
         (img_bytes, rng_bytes, prof_bytes, tot_bytes)
     }
@@ -222,6 +236,7 @@ impl<'a> ResultBuffers<'a> {
         }
         if let (Some(b), Some(out)) = (&self.profile_read, host.profile.as_mut()) {
             let bytes = read(b, prof_bytes)?;
+            let stride = self.kern.profile_stride(channels);
             if !self.kern.total() {
                 // exact: sums of the fixed-point integers (|sum| < 2^61 by the scale)
                 let words: &[u32] = bytemuck::cast_slice(&bytes);
@@ -229,7 +244,7 @@ impl<'a> ResultBuffers<'a> {
                     for ch in 0..channels {
                         let s: i64 = (0..nb)
                             .map(|k| {
-                                let i = 2 * ((l * nb + k) * channels + ch);
+                                let i = 2 * ((l * nb + k) * stride + ch);
                                 (((words[i + 1] as u64) << 32) | words[i] as u64) as i64
                             })
                             .sum();
@@ -238,7 +253,21 @@ impl<'a> ResultBuffers<'a> {
                 }
             }
             let p = fixed(&bytes);
-            out[start * nb * channels..(start + m) * nb * channels].copy_from_slice(&p);
+            let dst = &mut out[start * nb * channels..(start + m) * nb * channels];
+            if stride == channels {
+                dst.copy_from_slice(&p);
+            } else {
+                // each bin's channels, then its area moment (decoded at its own scale)
+                let moment = host.area_moment.as_mut().expect("area moment asked");
+                let q = &mut moment[start * nb..(start + m) * nb];
+                let words: &[u32] = bytemuck::cast_slice(&bytes);
+                for (k, v) in p.chunks_exact(stride).enumerate() {
+                    dst[k * channels..(k + 1) * channels].copy_from_slice(&v[..channels]);
+                    let i = 2 * (k * stride + channels);
+                    let units = (((words[i + 1] as u64) << 32) | words[i] as u64) as i64;
+                    q[k] = units as f64 / self.fix_area;
+                }
+            }
         }
         // the image and range are decoded straight from the mapped buffers (no host copy of
         // them): both are mapped at once, as the sampled pulse needs both
@@ -282,6 +311,22 @@ impl<'a> ResultBuffers<'a> {
                         p,
                     )
                 });
+            if let Some(moment) = host.area_moment.as_mut() {
+                let q = &mut moment[start * nb..(start + m) * nb];
+                q.par_chunks_mut(nb).enumerate().for_each(|(l, q)| {
+                    host_area_moment(
+                        pulse,
+                        &img[l * px * channels..(l + 1) * px * channels],
+                        &foot[l * px * 4..(l + 1) * px * 4],
+                        channels,
+                        lay.r_min,
+                        sensor.bin_width,
+                        lay.pix * lay.pix,
+                        cap,
+                        q,
+                    )
+                });
+            }
         }
         if let (Some(v), Some(out)) = (img, host.image.as_mut()) {
             downsample_sum(
@@ -371,6 +416,56 @@ pub fn host_profile(
                 for c in 0..ch {
                     o[c] += wt * (v[c] as f64).clamp(-cap, cap);
                 }
+            }
+        }
+    }
+}
+
+/// The area moment ([`crate::render::Rendered::area_moment`]) of one attitude for a
+/// sampled pulse, on the host in f64 beside [`host_profile`]: every covered pixel with a
+/// positive `S0` (channel 0 of `img`, clamped to `cap`) adds `S0^2 / (coverage pix2)`
+/// (`pix2` the pixel's area, m^2) times the mean squared pointwise pulse weight of bin `k`
+/// over its footprint (the two-point rule of the CPU renderers). A pixel that
+/// spans several surfaces counts as one part here, at its mean range and its largest
+/// part's footprint (the kernel's footprint mode).
+#[allow(clippy::too_many_arguments)]
+pub fn host_area_moment(
+    pulse: &SampledPulse,
+    img: &[f32],
+    foot: &[f32],
+    ch: usize,
+    r_min: f64,
+    bin_width: f64,
+    pix2: f64,
+    cap: f64,
+    out: &mut [f64],
+) {
+    let nb = out.len();
+    let (lo, hi) = pulse.support();
+    let mut edges = Vec::new();
+    let mut weights = Vec::new();
+    for (k, f) in foot.chunks_exact(4).enumerate() {
+        let (r0, cov) = (f[0] as f64, f[3] as f64);
+        let s0 = (img[k * ch] as f64).min(cap);
+        if r0.is_nan() || s0.is_nan() || s0 <= 0.0 || cov.is_nan() || cov <= 0.0 {
+            continue;
+        }
+        let e = s0 * s0 / (cov * pix2);
+        let (a, b) = (f[1] as f64, f[2] as f64);
+        // the mean squared pointwise weight over the footprint by the two-point rule of
+        // the CPU renderers (render::cpu's Accumulator::add_moment)
+        let d = ((a * a + b * b) / 12.0).sqrt();
+        for off in [d, -d] {
+            let r = r0 + off;
+            let k0 = (((r + lo - r_min) / bin_width).floor().max(0.0) as usize).min(nb - 1);
+            let k1 = (((r + hi - r_min) / bin_width).floor().max(0.0) as usize).min(nb - 1);
+            edges.clear();
+            edges.extend((k0..=k1 + 1).map(|j| r_min + j as f64 * bin_width));
+            weights.clear();
+            weights.resize(k1 + 1 - k0, 0.0);
+            pulse.bin_weights(r, 0.0, 0.0, &edges, &mut weights);
+            for (j, &wt) in weights.iter().enumerate() {
+                out[k0 + j] += 0.5 * wt * wt * e;
             }
         }
     }
