@@ -1339,8 +1339,9 @@ def measure(
         counts), a detector dead time shorter than the range gate of the bins (not
         modelled: :meth:`pprender.inverse.detector.Detector.regime`), or, with a
         ``Speckle`` that takes the illuminated area from the render, a profile without it
-        (an array, or a RenderResult rendered without ``("mueller", "range")``: render with
-        ``outputs=("profile", "mueller", "range")`` or give ``Speckle(target_area=...)`` or
+        (an array, or a RenderResult rendered without ``"illuminated_area"`` or
+        ``("mueller", "range")``: render with ``outputs=("profile", "illuminated_area")``
+        or ``("profile", "mueller", "range")`` or give ``Speckle(target_area=...)`` or
         ``Speckle(dof=...)``), or a per-bin ``target_area`` whose length is not the number
         of bins.
 
@@ -1386,9 +1387,13 @@ def measure(
     else:
         area = None
         sp = instrument.speckle
-        if sp.source == "render" and result is not None and result.range is not None and (
-            result.mueller is not None or result.stokes is not None or result.intensity is not None
+        if sp.source == "render" and result is not None and (
+            getattr(result, "illuminated_area", None) is not None
+            or result.range is not None
+            and (result.mueller is not None or result.stokes is not None or result.intensity is not None)
         ):
+            # the render's own per-bin area (outputs with "illuminated_area"; a profile-only
+            # render can give it), else the one derived from its images
             area = _speckle.illuminated_area(result, sp.pulse_fwhm)
         stokes, gi, dof = _speckle_state(p, mueller, instrument, area)
         rows = instrument.channels.rows  # type: ignore[union-attr]

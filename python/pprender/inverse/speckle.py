@@ -1182,6 +1182,7 @@ class Speckle:
       target_area)`` with the instrument's aperture, wavelength and range;
     * neither (default): the per-bin effective area :func:`illuminated_area` of the
       :class:`~pprender.RenderResult` given to ``measure``, which must then be rendered
+      with ``outputs=("profile", "illuminated_area")`` (the render's own per-bin area) or
       with images and ranges, ``outputs=("profile", "mueller", "range")`` (or
       ``"stokes"`` for a single transmitted state); bins without any seen pixel get no
       speckle (they have no signal).
@@ -1290,8 +1291,8 @@ class Speckle:
         if area is None:
             raise Error(
                 "invalid profile: Speckle() takes the illuminated area from the render: pass a RenderResult "
-                'rendered with outputs=("profile", "mueller", "range") (or "stokes" for one transmitted state), '
-                "or give Speckle(target_area=...) or Speckle(dof=...)"
+                'rendered with outputs=("profile", "illuminated_area") or outputs=("profile", "mueller", "range") '
+                '(or "stokes" for one transmitted state), or give Speckle(target_area=...) or Speckle(dof=...)'
             )
         a = _array(area, "area", "projected areas in m^2")
         if not np.all(np.isfinite(a)) or np.any(a < 0):
