@@ -22,3 +22,12 @@ pub mod render;
 mod python;
 
 pub use error::{Error, Result};
+
+/// The model's version: bumped with every change that moves rendered or evaluated numbers
+/// (a fix, a new default, a recalibration; not a refactor or a speed-up that keeps them
+/// bit for bit). Databases (Python `pprender.build_database`) record it in their
+/// fingerprint, so that a store built by another model is never resumed into.
+///
+/// 1 (2026-11-27): first recorded; `orders = Surface` materials calibrate the single
+/// term's masking to the traced surface's order 1.
+pub const MODEL_VERSION: u32 = 1;

@@ -197,7 +197,7 @@ def test_layout_coordinates_and_attributes(db, setup) -> None:
     assert np.allclose(ds.time.values, 2 * ds.range.values / pp.SPEED_OF_LIGHT, rtol=1e-15, atol=0)
     assert ds.complete.values.all() and np.isfinite(ds.profile.values).all()
     a = ds.attrs
-    assert a["pprender_version"] == pp.__version__
+    assert a["pprender_version"] == pp.__version__ and a["model_version"] == pp.MODEL_VERSION
     assert a["sensor"] == json.loads(json.dumps(dataclasses.asdict(setup["sensor"])))
     assert a["attitudes"]["count"] == N_ATT and a["attitudes"]["grid"] == {"method": "so3.grid", "n": N_ATT}
     assert a["chunk_attitudes"] == CHUNK and a["dtype"] == "float32"
@@ -323,7 +323,7 @@ def test_write_chunk_in_any_order_is_idempotent(db, setup, tmp_path) -> None:
         database.write_chunk(path, 16)
 
 
-def test_changed_parameters_raise_unless_overwrite(db, setup, tmp_path) -> None:
+def test_changed_parameters_raise_unless_overwrite(db, setup, tmp_path, monkeypatch) -> None:
     path = tmp_path / "p.zarr"
     small = {**setup, "attitudes": setup["attitudes"][:4]}
     _build(path, small, chunk_attitudes=2)
@@ -335,6 +335,11 @@ def test_changed_parameters_raise_unless_overwrite(db, setup, tmp_path) -> None:
         _build(path, {**small, "materials": {"aluminium": materials.get("aluminium", alpha=0.2),
                                               "white_paint": setup["materials"]["white_paint"]}},
                chunk_attitudes=2)
+    # a store built by another model (pprender.MODEL_VERSION) is not resumed into
+    monkeypatch.setattr(pp, "MODEL_VERSION", pp.MODEL_VERSION + 1)
+    with pytest.raises(pp.Error, match=r"different parameters \(model_version\)"):
+        _build(path, small, chunk_attitudes=2)
+    monkeypatch.undo()
     ds = _build(path, {**small, "sensor": pp.Lidar(resolution=33)}, chunk_attitudes=2, overwrite=True)
     assert ds.attrs["sensor"]["resolution"] == 33 and ds.complete.values.all()
     # something that is not a database is never removed, even with overwrite

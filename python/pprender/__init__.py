@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from ._core import BrdfTable, Error, Material, __version__, brdf_table
+from ._core import MODEL_VERSION, BrdfTable, Error, Material, __version__, brdf_table
 from .lidar import SPEED_OF_LIGHT, Lidar, OffCentreWarning, RenderResult, Scene, Settings, device_info, render
 from . import inverse  # noqa: E402  (its modules' heavy imports are lazy)
 from .inverse import classify, database, distributed, instrument, so3  # noqa: E402
@@ -68,6 +68,7 @@ __all__ = [
     "device_info",
     "render",
     "__version__",
+    "MODEL_VERSION",
     "albedo",
     "brdf",
     "brdf_table",

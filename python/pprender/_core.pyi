@@ -11,6 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
+MODEL_VERSION: int
 
 class Error(ValueError): ...
 

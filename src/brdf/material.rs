@@ -303,12 +303,17 @@ impl Material {
             s_fresnel: None,
             surface_orders,
         };
-        // the surface's order 1 (`Surface::calibrate_masking`), before any table reads the
+        // the surface's order 1 (`calibration::calibrate_masking`), before any table reads the
         // masking
         if let Some(so) = mat.surface_orders.clone() {
             if mat.spec.shadowing != Shadowing::None {
                 let target: Vec<f64> = (0..N_THETA).map(|k| so.order1_target(k)).collect();
-                mat.surface.calibrate_masking(THETA_STEP, &target);
+                super::calibration::calibrate_masking(
+                    &mut mat.surface,
+                    THETA_STEP,
+                    &target,
+                    ALBEDO_ORDER,
+                );
             }
         }
         if let Some(step) = mat.spec.alpha_step {

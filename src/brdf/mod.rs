@@ -20,6 +20,7 @@
 
 pub mod albedo;
 pub mod bank;
+pub mod calibration;
 pub mod double;
 pub mod material;
 pub mod orders;

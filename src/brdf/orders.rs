@@ -366,7 +366,7 @@ impl SurfaceOrders {
     }
 
     /// The white (`F = 1`) albedo the single term is calibrated to at incidence node `k`
-    /// ([`crate::brdf::surface::Surface::calibrate_masking`]): with the multiple term, what
+    /// ([`crate::brdf::calibration::calibrate_masking`]): with the multiple term, what
     /// the banks' orders (with `F = 1`, as their tables hold them) and the fraction past
     /// [`MAX_ORDER`] leave of the incident light, so that the depolarizing remainder carries
     /// only that fraction; without it, the bank's counted order-1 albedo.

@@ -30,7 +30,7 @@ fn facet_jones(wi: V3, wo: V3, h: V3, rs: C64, rp: C64, bases: (V3, V3, V3, V3))
 /// Masking term `G(wi, wo) / (cos_i cos_o)` (seed eq. 6 with `P(k) = c/(c + N)`), written
 /// with `Q = P/c = 1/(c + N)` so that it stays finite when one direction is grazing; times
 /// `s(theta_i) s(theta_o)` when the masking is calibrated to a traced surface
-/// ([`super::surface::Surface::calibrate_masking`]).
+/// ([`super::calibration::calibrate_masking`]).
 #[inline]
 pub fn masking_over_cosines(mat: &Surface, wi: V3, wo: V3) -> f64 {
     let si = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();

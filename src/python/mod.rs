@@ -28,6 +28,7 @@ impl From<crate::Error> for PyErr {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("Error", m.py().get_type::<Error>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("MODEL_VERSION", crate::MODEL_VERSION)?;
     bank::register(m)?;
     brdf::register(m)?;
     cache::register(m)?;

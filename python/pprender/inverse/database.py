@@ -28,8 +28,10 @@ Conventions (every function in this module):
     assignments), ``shapes`` (vertex/face counts, parts, bounds, SHA-256 of the mesh
     arrays), ``attitudes`` (count, SHA-256 of the float64 quaternions, the user's grid
     description), ``chunk_attitudes``, ``range_window``, ``range_grid``, ``dtype``,
-    ``pprender_version``, ``created`` (UTC, ISO 8601) and ``fingerprint``, the SHA-256
-    of all of these but ``created`` and ``range_grid``.
+    ``pprender_version``, ``model_version`` (:data:`pprender.MODEL_VERSION`, bumped with
+    every change that moves rendered numbers: a store built by another model is not
+    resumed), ``created`` (UTC, ISO 8601) and ``fingerprint``, the SHA-256 of all of
+    these but ``created`` and ``range_grid``.
   - ``_build/``: a Zarr group (invisible to xarray) with each mesh's vertices, faces
     and per-face part indices, so that any process can render any chunk from the store
     alone (:func:`write_chunk`).
@@ -673,11 +675,12 @@ def _create(
     except (TypeError, ValueError):
         raise Error("invalid attitude_grid: a JSON-serializable description (str, dict, ...)") from None
 
-    from .. import __version__
+    from .. import MODEL_VERSION, __version__
 
     inputs: dict[str, Any] = {
         "format": FORMAT,
         "pprender_version": __version__,
+        "model_version": MODEL_VERSION,
         "sensor": _sensor_params(sensor),
         "shapes": [dict(name=n, **m.summary()) for n, m in zip(shape_names, meshes)],
         "materials": specs,

@@ -230,7 +230,7 @@ fn the_cache_directory() {
 }
 
 /// The single term's masking is calibrated to the surface's order 1
-/// ([`crate::brdf::surface::Surface::calibrate_masking`]): its white albedo equals the
+/// ([`crate::brdf::calibration::calibrate_masking`]): its white albedo equals the
 /// target at every incidence node (to the calibration's tolerance, 1e-6, plus the
 /// quadrature's: 2e-6); the target (what the banks' orders >= 2 leave) is the bank's
 /// counted order-1 albedo to the tables' own albedo error.

@@ -109,7 +109,7 @@ pub struct SingleParams {
     pub correlation: Correlation,
     pub excess: ZTable,
     /// The masking's calibration `s` to a traced surface (`G s(theta_i) s(theta_o)`,
-    /// [`crate::brdf::surface::Surface::calibrate_masking`]), if any.
+    /// [`crate::brdf::calibration::calibrate_masking`]), if any.
     pub calibration: Option<ZTable>,
 }
 
