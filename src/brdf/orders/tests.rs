@@ -315,12 +315,7 @@ fn material_orders_three_and_up_match_the_explicit_surface() {
     })
     .unwrap();
     let (r, se) = (out.mueller[2][0][0], out.stderr[2][0][0]);
-    let di = |m: &Mat4| {
-        let sum: f64 = m.iter().flatten().map(|x| x * x).sum();
-        ((sum - m[0][0] * m[0][0]) / (3.0 * m[0][0] * m[0][0]))
-            .max(0.0)
-            .sqrt()
-    };
+    let di = |m: &Mat4| crate::optics::polarimetry::depolarization_index(m).unwrap();
     let (di_model, di_ref) = (di(&m), di(&out.mueller[2]));
     eprintln!(
         "3+ material {} surface {r} +- {se}; DI {di_model} vs {di_ref}",
