@@ -24,9 +24,12 @@ renders (``--truth render``, default) or from the table (``--truth table``); the
 (:func:`pprender.inverse.tumble.fit_spin`) always uses the table. The instrument is the
 ``"stokes"`` preset (transmit H; six analyzers), scaled so that the mean signal per pulse
 over the table's directions is ``S`` with ``S / sqrt(S + B) = --snr`` and background ``B``
-= 10 % of ``S``. Scoring: :func:`pprender.inverse.tumble.spin_error` modulo the half turn
-about the line of sight (also reported: the roll-invariant score, the angle between axis
-and line of sight only).
+= 10 % of ``S``. Scoring, as the issue asks, modulo the symmetries a monostatic profile
+cannot see: :func:`pprender.inverse.tumble.spin_error` modulo the half turn about the line
+of sight for truths whose roll about the line of sight is observable (the noise-free
+log-likelihood ratio against the motion turned about the line of sight exceeds 5), and
+modulo any roll (the angle between axis and line of sight only) for the others, whose
+profiles are roll invariant throughout (both scores are also reported for every truth).
 
 Moving line of sight (``--sweep DEG``, writes docs/spin-recovery-pass.md): the line of
 sight turns uniformly by ``DEG`` about inertial ``+y`` over the observation (``+z`` at
@@ -586,6 +589,11 @@ def main() -> None:
         ok = (r[:, 4] < 5.0) & (r[:, 5] < 0.01)
         ok_cone = (r[:, 6] < 5.0) & (r[:, 5] < 0.01)
         observable = r[:, 10] > 5.0
+        # the issue's score: modulo the symmetries the data cannot see. Where the roll about
+        # the line of sight is observable, no symmetry is allowed beyond the half turn (which
+        # a monostatic profile never sees); where it is not (a roll-invariant profile
+        # throughout), the roll is a symmetry and only the axis-LOS angle and the rate count
+        ok_issue = np.where(observable, ok, ok_cone)
         lines = [
             "# Spin-state recovery (principal-axis spin)",
             "",
@@ -602,8 +610,13 @@ def main() -> None:
             f"- Truths run: **{len(rows)}** of the 30 the target asks for"
             + ("" if len(rows) >= 30 else " (the rest did not fit in the time; the full-run command is above)")
             + ".",
-            f"- Axis within 5 deg (modulo the half turn about the line of sight) and rate within 1 %: "
-            f"**{int(ok.sum())} / {len(rows)}** ({100 * ok.mean():.0f} %).",
+            f"- Scored as the issue asks, modulo the symmetries the data cannot see: axis within 5 deg "
+            f"and rate within 1 %, modulo the half turn about the line of sight where the roll is "
+            f"observable (below), and modulo any roll about it where the roll is not (there the "
+            f"axis-LOS angle within 5 deg): **{int(ok_issue.sum())} / {len(rows)}** "
+            f"({100 * ok_issue.mean():.0f} %; the target is 27 / 30).",
+            f"- Axis within 5 deg (modulo the half turn about the line of sight) and rate within 1 %, "
+            f"whether or not the roll is observable: {int(ok.sum())} / {len(rows)} ({100 * ok.mean():.0f} %).",
             f"- Roll-invariant score (angle between axis and line of sight within 5 deg, rate within 1 %): "
             f"{int(ok_cone.sum())} / {len(rows)}.",
             f"- Median axis error {np.median(r[:, 4]):.2f} deg, median rate error {np.median(r[:, 5]):.2e}; "
@@ -614,7 +627,12 @@ def main() -> None:
             f"- Roll observable (the truth against its motion turned about the line of sight by each of "
             f"{', '.join(str(b) for b in ROLLS_DEG)} deg: the smallest expected log-likelihood ratio, "
             f"noise free, in the table's model, > 5): {int(np.sum(observable))} / {len(rows)}; of those, axis within 5 deg "
-            f"and rate within 1 %: {int(np.sum(ok & observable))} / {int(np.sum(observable))}. Where the "
+            f"and rate within 1 %: {int(np.sum(ok & observable))} / {int(np.sum(observable))}; of the "
+            f"others, axis-LOS angle within 5 deg and rate within 1 %: "
+            f"{int(np.sum(ok_cone & ~observable))} / {int(np.sum(~observable))} (the smallest ratio "
+            f"of the observable ones is {r[observable, 10].min() if observable.any() else float('nan'):.3g}, "
+            f"the largest of the others {r[~observable, 10].max() if (~observable).any() else float('nan'):.3g}: "
+            f"the threshold does not decide any truth). Where the "
             f"ratio is 0 the line of sight never meets the panel-bus dihedrals during the observation; "
             f"the single-bounce Mueller profile (`M11 = -M22`, no off-diagonal linear terms) is then "
             f"exactly roll invariant and no estimator can find the axis's azimuth about the line of "
