@@ -437,7 +437,10 @@ _MATS: Dict[Tuple[float, complex, str, Optional[int]], Optional[Dict[str, pprend
 # orders="surface" the single term's masking is calibrated to the bank's order 1 with the
 # multiple term's energy balance (Surface::calibrate_masking), which a single-term material
 # (no banks) does not have; dm has the same calibration as sdm.
-TERM_SETS = {"d": ("double",), "dm": ("double", "multiple"), "sdm": ("single", "double", "multiple")}
+# orders="seed" has no calibration, so its order 1 is the single-term material's, which
+# spares the seed's double term (~15 ms a point) the fine cone rule.
+TERM_SETS = {"s": ("single",), "d": ("double",), "dm": ("double", "multiple"),
+             "sdm": ("single", "double", "multiple")}
 
 
 def model_materials(alpha: float, eta: complex, mode: str,
@@ -454,9 +457,20 @@ def model_materials(alpha: float, eta: complex, mode: str,
     return _MATS[key]
 
 
+_VALUES: Dict[Tuple[Cell, str, Settings], Optional[Dict[str, np.ndarray]]] = {}
+
+
 def model_values(cell: Cell, mode: str, s: Settings) -> Optional[Dict[str, np.ndarray]]:
     """The model's cone-averaged Mueller BRDFs ``(4, nexit, 4, 4)`` (orders 1, 2, 3+, whole)
-    in the reference's bases, or None where the mode does not exist."""
+    in the reference's bases, or None where the mode does not exist (kept per process: the
+    model does not depend on the reference's tallies)."""
+    key = (cell, mode, s)
+    if key not in _VALUES:
+        _VALUES[key] = _model_values(cell, mode, s)
+    return _VALUES[key]
+
+
+def _model_values(cell: Cell, mode: str, s: Settings) -> Optional[Dict[str, np.ndarray]]:
     mats = model_materials(cell.alpha, cell.eta, mode, s.bank_rays)
     if mats is None:
         return None
@@ -466,7 +480,7 @@ def model_values(cell: Cell, mode: str, s: Settings) -> Optional[Dict[str, np.nd
         mat = mats[name]
         return ConeRule.get(wi, wos, s.cone, rule).average(lambda a, b: pprender.brdf(mat, a, b))
 
-    s_f = avg("sdm", FINE) - avg("dm", FINE)
+    s_f = avg("s", FINE) if mode == "seed" else avg("sdm", FINE) - avg("dm", FINE)
     rule = COARSE if mode == "seed" else SURFACE_RULE
     d_c, dm_c = (avg(n, rule) for n in ("d", "dm"))
     return {"m": np.stack([s_f, d_c, dm_c - d_c, s_f + dm_c])}
@@ -774,7 +788,8 @@ def page(res: Dict[str, Any], argv: Sequence[str], cells_requested: Sequence[Cel
       "1e5 + call: none of the path banks' (seed 1, own streams) nor of the development scripts'.")
     a("- Model: `pprender.Material(\"beckmann\", alpha, eta, coherent_backscatter=False, orders=...)`; order 1 = "
       "terms (single, double, multiple) - (double, multiple) (with `orders=\"surface\"` the single term's masking is "
-      "calibrated to the bank's order 1 along with the banks), order 2 = (double,), 3+ = (double, multiple) - "
+      "calibrated to the bank's order 1 along with the banks; `orders=\"seed\"` has no calibration and takes "
+      "terms (single,), the same sum), order 2 = (double,), 3+ = (double, multiple) - "
       "(double,), whole = (single, "
       'double, multiple). `orders="surface"` exists for alpha in [0.3, 1] only (n/a elsewhere)'
       + (f"; path banks of {s.bank_rays:.0e} rays per incidence node" if s.bank_rays else
