@@ -68,6 +68,7 @@ import numpy as np
 os.environ.setdefault("NODEVICE_SELECT", "1")
 
 import pprender  # noqa: E402
+from pprender import materials, models  # noqa: E402
 from pprender.inverse import so3, tumble  # noqa: E402
 from pprender.inverse.instrument import Instrument, expected_counts  # noqa: E402
 
@@ -101,8 +102,8 @@ def matrices(q: np.ndarray) -> np.ndarray:
 
 class Target:
     def __init__(self, resolution: int, bin_m: float) -> None:
-        mesh = pprender.models.cubesat("3U", antenna=False, detail=0)
-        self.scene = pprender.Scene(mesh, pprender.materials.get("aluminium", alpha=0.3))
+        mesh = models.cubesat("3U", antenna=False, detail=0)
+        self.scene = pprender.Scene(mesh, materials.get("aluminium", alpha=0.3))
         self.sensor = pprender.Lidar(wavelength=1064e-9, pulse_fwhm=100e-12, resolution=resolution, bounces=2)
         self.bin_m = bin_m
         self.edges: np.ndarray | None = None
@@ -144,15 +145,18 @@ class Table:
             t0 = time.perf_counter()
             self.profiles = target.render(q).reshape(self.n_theta, self.n_phi, -1, 4, 4)
             self.build_s = time.perf_counter() - t0
+            assert target.edges is not None  # set by the first render
             if cache is not None:
                 np.savez(cache, key=key, profiles=self.profiles, build_s=self.build_s, edges=target.edges,
                          raw_edges=target.raw_edges, factor=target.factor)
-        self.edges = target.edges
+        assert target.edges is not None
+        self.edges: np.ndarray = target.edges
         self.set_instrument(instrument)
 
     def set_instrument(self, instrument: Instrument) -> None:
         self.instrument = instrument
         ch = instrument.channels
+        assert not isinstance(ch, str)  # Instrument resolves a preset name to Channels
         self.rows = np.asarray(ch.rows) * instrument.counts_per_cross_section  # (C, 4)
         self.gens = np.asarray(ch.generators_array)  # (C, 4)
         self.background = instrument.background_counts(self.edges)  # (B, C)
@@ -262,13 +266,13 @@ def ring_candidates(p1: np.ndarray, geometry: tumble.PulseGeometry, times: np.nd
     a1 = tumble._rotate(conj(t_m), tumble._axis_from_angles(p1[0], p1[1]))
     out = []
     for gamma in np.arange(n_rolls) * 2 * math.pi / n_rolls:
-        g = tumble._axis_angle(l_m, gamma)
+        g = tumble._axis_angle(l_m, np.asarray(gamma))
         ag = tumble._rotate(g, a1)
         perp = np.cross(l_m, ag)
         for tilt in tilts_deg:
             if np.linalg.norm(perp) < 1e-6 and tilt != 0:
                 continue
-            a = ag if tilt == 0 else tumble._rotate(tumble._axis_angle(perp / np.linalg.norm(perp), math.radians(tilt)), ag)
+            a = ag if tilt == 0 else tumble._rotate(tumble._axis_angle(perp / np.linalg.norm(perp), np.asarray(math.radians(tilt))), ag)
             qb = tumble.quaternion_multiply(tumble.quaternion_multiply(tumble._align(ag, a), g), q1)  # spin about a
             u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
             u /= np.linalg.norm(u)
@@ -437,7 +441,7 @@ def run_pass(args: argparse.Namespace, *, commit: str, rng: np.random.Generator,
         else:
             lam = table(g.attitudes(q_truth))
         counts = np.random.default_rng([args.seed, i]).poisson(lam)
-        roll_info = min(kl(table, g, q_truth, tumble.quaternion_multiply(tumble._axis_angle(l_m, math.radians(b)),
+        roll_info = min(kl(table, g, q_truth, tumble.quaternion_multiply(tumble._axis_angle(l_m, np.asarray(math.radians(b))),
                                                                          q_truth)) for b in ROLLS_DEG)
         mirror_info = kl(table, g, q_truth, mirror_image(q_truth, n_sweep, 0))
         snr_pulse = np.sum(lam - table.background, axis=(1, 2)) / np.sqrt(np.sum(lam, axis=(1, 2)))
