@@ -30,4 +30,7 @@ pub use error::{Error, Result};
 ///
 /// 1 (2026-11-27): first recorded; `orders = Surface` materials calibrate the single
 /// term's masking to the traced surface's order 1.
-pub const MODEL_VERSION: u32 = 1;
+/// 2 (2026-11-27): the double bounce's correlated blocking takes the ratio of two
+/// vanishing masking excesses from their closed form (the escape table of the seed's
+/// double term had a jump near the normal; the albedos move below 1e-6).
+pub const MODEL_VERSION: u32 = 2;

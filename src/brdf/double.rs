@@ -132,11 +132,22 @@ pub fn double_jones_in(
     Some((j, d, h2))
 }
 
+/// Smallest masking excess over the cosine, `N / c`, whose table value [`blocked_over_n`]
+/// divides by; below, it takes the ratio of two excesses from their closed form.
+const MIN_TABLE_EXCESS: f64 = 1e-8;
+
 /// `(P(a) - P(a, b)) / (N(b) cos_a)` for `a`, `b` above the horizon: the probability that a
 /// facet seen from `a` is blocked toward `b`, over the hit-density normalization `N(b)`, in
 /// the material's correlated masking (seed eq. 6) or uncorrelated when `correlated` is
 /// false. Written without cancellation: with `f` the correlation of the azimuths,
-/// `= (1 - f) Q(a) / (c_b + N_b) + f max(0, N_b - c_b N_a / c_a) / (N_b (c_a + N_a)(c_b + N_b))`.
+/// `= (1 - f) Q(a) / (c_b + N_b) + f max(0, 1 - rho) / ((c_a + N_a)(c_b + N_b))`,
+/// `rho = c_b N_a / (c_a N_b) = Lambda(a) / Lambda(b)` from the masking's closed form in
+/// logarithms where it has one ([`Surface::masking_ratio`]) when `N_b < 1e-8 c_b`: near
+/// the normal both excesses vanish (below the table's resolution, or f64's) while `rho`
+/// stays finite, and
+/// dropping the second part there (as a ratio of table values did) lost up to half the
+/// escape after the second bounce of a smooth surface (`S(v)`: 0.42 instead of 0.89 at
+/// 5 deg for Beckmann alpha 0.2, a jump at 29 deg where the table reached 0).
 #[inline]
 pub(crate) fn blocked_over_n(mat: &Surface, a: V3, b: V3, correlated: bool) -> f64 {
     let (ca, cb) = (a[2], b[2]);
@@ -156,12 +167,22 @@ pub(crate) fn blocked_over_n(mat: &Surface, a: V3, b: V3, correlated: bool) -> f
         1.0
     };
     let first = (1.0 - f) / ((ca + na) * (cb + nb));
-    let second = if f > 0.0 && nb > 0.0 {
-        f * (nb - cb * na / ca).max(0.0) / (nb * (ca + na) * (cb + nb))
+    if f <= 0.0 {
+        return first;
+    }
+    // the table's excess is good to 1e-3 relative down to N = 1e-8 c (7e-4 measured for
+    // Beckmann alpha 0.05-1) and reaches 0 near 1e-38 c: below, the closed form
+    let closed = if nb > MIN_TABLE_EXCESS * cb {
+        None
     } else {
-        0.0
+        mat.masking_ratio(ca, sa, cb, sb)
     };
-    first + second
+    let rho = match closed {
+        Some(r) => r,
+        None if nb > 0.0 => cb * na / (ca * nb),
+        None => return first,
+    };
+    first + f * (1.0 - rho).max(0.0) / ((ca + na) * (cb + nb))
 }
 
 /// The path weight over `cos_i cos_o` of the double bounce with intermediate direction

@@ -72,6 +72,39 @@ impl Surface {
         }
     }
 
+    /// `(c_b N(a)) / (c_a N(b)) = Lambda(a) / Lambda(b)`, the ratio of the masking
+    /// functions of two directions (`c`, `s`: cosine and sine of each), in closed form
+    /// where the masking has one (APS, or Smith's exact `G1`, of Beckmann and GGX), in
+    /// logarithms: near the normal both excesses are far below what the table resolves
+    /// (it returns 0 for Beckmann beyond `cot theta / alpha` of about 9) or f64 holds
+    /// (`exp(-a^2)` underflows beyond `a` = 27), while their ratio is finite and decides
+    /// the correlated blocking of the double bounce ([`super::double`]). None where the
+    /// masking has no closed form (Blinn-Phong, the approximate Smith `G1`s, no shadowing).
+    pub fn masking_ratio(&self, ca: f64, sa: f64, cb: f64, sb: f64) -> Option<f64> {
+        let aps = match self.spec.shadowing {
+            Shadowing::Aps => self.spec.masking != MaskingEval::Seed,
+            Shadowing::Smith => self.spec.smith_g1 == SmithG1::Exact,
+            Shadowing::None => false,
+        };
+        if !aps {
+            return None;
+        }
+        let (la, lb) = (
+            masking::ln_lambda_closed_form(&self.spec.distribution, ca, sa)?,
+            masking::ln_lambda_closed_form(&self.spec.distribution, cb, sb)?,
+        );
+        Some(if lb == f64::NEG_INFINITY {
+            // b along the normal: never masked; a too (the same limit) or a masked at all
+            if la == f64::NEG_INFINITY {
+                1.0
+            } else {
+                f64::INFINITY
+            }
+        } else {
+            (la - lb).exp()
+        })
+    }
+
     /// [`Self::masking_excess`] with the table coordinate already computed.
     #[inline]
     pub fn masking_excess_z(&self, c: f64, s: f64, z: f64) -> f64 {
