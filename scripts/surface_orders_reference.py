@@ -433,12 +433,12 @@ class ConeRule:
 
 
 _MATS: Dict[Tuple[float, complex, str, Optional[int]], Optional[Dict[str, pprender.Material]]] = {}
-# The terms add up, so order 1 is sdm - dm and 3+ is dm - d. Not s alone: with
-# orders="surface" the single term's masking is calibrated to the bank's order 1 with the
-# multiple term's energy balance (Surface::calibrate_masking), which a single-term material
-# (no banks) does not have; dm has the same calibration as sdm.
-# orders="seed" has no calibration, so its order 1 is the single-term material's, which
-# spares the seed's double term (~15 ms a point) the fine cone rule.
+# The terms add up: 3+ is dm - d, and order 1 is sdm - dm. With orders="surface" it must
+# be that difference: the single term's masking is calibrated to the bank's order 1 with
+# the multiple term's energy balance (Surface::calibrate_masking), which a single-term
+# material (no banks) does not have, and dm has the same calibration as sdm. orders="seed"
+# has no calibration, so there order 1 is the single-term material "s", which spares the
+# seed's double term (~15 ms a point) the fine cone rule.
 TERM_SETS = {"s": ("single",), "d": ("double",), "dm": ("double", "multiple"),
              "sdm": ("single", "double", "multiple")}
 
