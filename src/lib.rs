@@ -33,4 +33,8 @@ pub use error::{Error, Result};
 /// 2 (2026-11-27): the double bounce's correlated blocking takes the ratio of two
 /// vanishing masking excesses from their closed form (the escape table of the seed's
 /// double term had a jump near the normal; the albedos move below 1e-6).
-pub const MODEL_VERSION: u32 = 2;
+/// 3 (2026-11-27): `orders = Surface` with the multiple term: the depolarizing remainder is
+/// the banks' truncation, smooth in `theta`, and the single term's calibration closes the
+/// energy balance between the banks' nodes and beyond the last (the remainder oscillated
+/// with the nodes' 2.5 deg period at grazing angles).
+pub const MODEL_VERSION: u32 = 3;

@@ -308,10 +308,19 @@ impl Material {
         if let Some(so) = mat.surface_orders.clone() {
             if mat.spec.shadowing != Shadowing::None {
                 let target: Vec<f64> = (0..N_THETA).map(|k| so.order1_target(k)).collect();
+                // with the remainder, the energy balance at every angle (the banks' albedos
+                // linear between their nodes, held beyond the last, as their tables are)
+                let closure = |theta: f64| {
+                    let c = theta.cos();
+                    1.0 - so.white_albedo(c) - so.remainder(c)
+                };
+                let fine: Option<&(dyn Fn(f64) -> f64 + Sync)> =
+                    so.rest.is_some().then_some(&closure);
                 super::calibration::calibrate_masking(
                     &mut mat.surface,
                     THETA_STEP,
                     &target,
+                    fine,
                     ALBEDO_ORDER,
                 );
             }
@@ -395,7 +404,7 @@ impl Material {
                 v += self.bank_albedo(c, true);
             }
             if let Some(w) = ms {
-                v += (1.0 - self.e_white_total(w, c, theta.sin(), None)).max(0.0) * f_ms;
+                v += self.remainder_deficit(w, c, theta.sin(), None) * f_ms;
             }
             v
         };
@@ -418,12 +427,13 @@ impl Material {
         // 1 - E_avg directly (it is ~alpha^2 for smooth surfaces: forming E_avg first
         // would leave only its rounding); the white E with the banks' orders
         let deficit = average_over_cosine(n, node, |c, s| {
-            let bank = if fresnel {
-                0.0
+            if fresnel {
+                1.0 - table.eval_csz(c, s, z_scaled(scale, c, s))
+            } else if self.surface_orders.is_some() {
+                self.remainder_deficit(&table, c, s, None)
             } else {
-                self.bank_albedo(c, false)
-            };
-            1.0 - table.eval_csz(c, s, z_scaled(scale, c, s)) - bank
+                1.0 - table.eval_csz(c, s, z_scaled(scale, c, s))
+            }
         });
         AlbedoTable {
             e_avg: 1.0 - deficit,
@@ -557,6 +567,21 @@ impl Material {
         e + self.bank_albedo(c, false)
     }
 
+    /// `1 - E` of the multiple term's depolarizing part at incidence cosine `c`: what the
+    /// white albedo `E` ([`Self::e_white_total`]) leaves; for a material whose single term
+    /// is calibrated to its path banks with the remainder on, the banks' truncation
+    /// ([`SurfaceOrders::remainder`], smooth), which the calibration makes the same to
+    /// about 1e-5 of the albedo.
+    #[inline]
+    fn remainder_deficit(&self, t: &AlbedoTable, c: f64, s: f64, z: Option<f64>) -> f64 {
+        if let Some(so) = &self.surface_orders {
+            if so.rest.is_some() && self.calibration.is_some() {
+                return so.remainder(c);
+            }
+        }
+        (1.0 - self.e_white_total(t, c, s, z)).max(0.0)
+    }
+
     /// `E(theta)` of the white (F = 1) single-bounce term, if tabulated.
     pub fn white_albedo(&self, c: f64, s: f64) -> Option<f64> {
         self.e_white.as_ref().map(|t| t.e.eval(c, s))
@@ -580,8 +605,8 @@ impl Material {
         if denom <= 1e-14 {
             return 0.0;
         }
-        let a = (1.0 - self.e_white_total(t, ci, 0.0, Some(zi))).max(0.0);
-        let b = (1.0 - self.e_white_total(t, co, 0.0, Some(zo))).max(0.0);
+        let a = self.remainder_deficit(t, ci, 0.0, Some(zi));
+        let b = self.remainder_deficit(t, co, 0.0, Some(zo));
         self.f_ms * a * b / denom
     }
 
@@ -623,7 +648,7 @@ impl Material {
         let ms = if self.spec.terms.multiple {
             let t = self.e_white.as_ref().unwrap();
             if t.e_avg < 1.0 - 1e-14 {
-                (1.0 - self.e_white_total(t, c, s, None)).max(0.0) * self.f_ms
+                self.remainder_deficit(t, c, s, None) * self.f_ms
             } else {
                 0.0
             }

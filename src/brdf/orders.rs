@@ -378,6 +378,28 @@ impl SurfaceOrders {
         }
     }
 
+    /// What the depolarizing remainder carries once the single term is calibrated
+    /// ([`Self::order1_target`]): the fraction of the light past [`MAX_ORDER`] at incidence
+    /// cosine `c` (`F = 1`), Catmull-Rom in `theta` between the incidence nodes (held beyond
+    /// the last), at least 0. Smooth: the energy balance between the nodes is the single
+    /// term's to close ([`crate::brdf::calibration::calibrate_masking`]'s fine stage), not
+    /// this, which would carry the banks' interpolation error between their nodes
+    /// (periodic in `theta`, up to 5-60 times the truncation itself).
+    pub fn remainder(&self, c: f64) -> f64 {
+        let n = N_THETA;
+        let u = (c.clamp(-1.0, 1.0).acos() / THETA_STEP).clamp(0.0, (n - 1) as f64);
+        let i = (u.floor() as usize).min(n - 2) as isize;
+        let p = |j: isize| self.truncated[j.clamp(0, n as isize - 1) as usize];
+        crate::microfacet::masking::catmull_rom(p(i - 1), p(i), p(i + 1), p(i + 2), u - i as f64)
+            .max(0.0)
+    }
+
+    /// The white (`F = 1`) albedo of the banks' orders at incidence cosine `c` (both parts,
+    /// as the tables interpolate them).
+    pub fn white_albedo(&self, c: f64) -> f64 {
+        self.albedo(Part::Double, false, c) + self.albedo(Part::Rest, false, c)
+    }
+
     /// The bank's counted order-1 albedo (`F = 1`) at incidence node `k`.
     pub fn order1_counted(&self, k: usize) -> f64 {
         self.order1[k]
