@@ -62,24 +62,35 @@ pub const BLOCKS_AT_ONCE: usize = 32;
 
 /// Bytes one attitude of [`render_cpu`] holds at its peak: the K sample id maps, one depth
 /// map while they are drawn, the requested per-pixel outputs and profile, and the
-/// profiles and pulse-weight scratch of the row blocks held at once ([`BLOCKS_AT_ONCE`]).
+/// profiles and pulse-weight scratch of the row blocks held at once ([`BLOCKS_AT_ONCE`]);
+/// with `area` (the `"illuminated_area"` output, [`accumulate::area`]) also its second
+/// moment per bin, and each block's moment and point scratch.
 pub fn attitude_bytes(
     width: usize,
     samples: usize,
     channels: usize,
     n_bins: usize,
     outputs: Outputs,
+    area: bool,
 ) -> usize {
     let px = width * width;
-    let mut b = px * (4 * samples + 8) + output_bytes(width, channels, n_bins, outputs);
+    let mut b = px * (4 * samples + 8) + output_bytes(width, channels, n_bins, outputs, area);
     let blocks = width.div_ceil(ROWS_PER_BLOCK).min(BLOCKS_AT_ONCE);
     let profile_channels = if outputs.profile { channels } else { 0 };
-    b += blocks * (profile_channels + 1) * n_bins * 8;
+    let area_arrays = if area { 2 } else { 0 };
+    b += blocks * (profile_channels + 1 + area_arrays) * n_bins * 8;
     b
 }
 
-/// Bytes of one attitude's requested outputs as [`render_cpu`] returns them.
-fn output_bytes(width: usize, channels: usize, n_bins: usize, outputs: Outputs) -> usize {
+/// Bytes of one attitude's requested outputs as [`render_cpu`] returns them (`area`: the
+/// illuminated area's moment per bin as well).
+fn output_bytes(
+    width: usize,
+    channels: usize,
+    n_bins: usize,
+    outputs: Outputs,
+    area: bool,
+) -> usize {
     let px = width * width;
     let mut b = channels * 8;
     if outputs.image {
@@ -91,6 +102,9 @@ fn output_bytes(width: usize, channels: usize, n_bins: usize, outputs: Outputs) 
     if outputs.profile {
         b += n_bins * channels * 8;
     }
+    if area {
+        b += n_bins * 8;
+    }
     b
 }
 
@@ -100,11 +114,12 @@ fn output_bytes(width: usize, channels: usize, n_bins: usize, outputs: Outputs) 
 pub fn render_bytes(mesh: &Mesh, sensor: &SensorSetup, n: usize, outputs: Outputs) -> usize {
     let lay = Layout::new(mesh, sensor);
     let (w, ch) = (lay.width, sensor.channels());
-    let one = attitude_bytes(w, sensor.samples, ch, lay.n_bins, outputs);
+    let area = accumulate::area(sensor, outputs);
+    let one = attitude_bytes(w, sensor.samples, ch, lay.n_bins, outputs, area);
     let at_once = attitudes_at_once(one, rayon::current_num_threads()).min(n);
     at_once
         .saturating_mul(one)
-        .saturating_add(n.saturating_mul(2 * output_bytes(w, ch, lay.n_bins, outputs)))
+        .saturating_add(n.saturating_mul(2 * output_bytes(w, ch, lay.n_bins, outputs, area)))
 }
 
 /// Memory the system can give without swapping (`MemAvailable` of `/proc/meminfo`), in
@@ -243,7 +258,14 @@ pub fn add_thin_pixels(
     let n_prof = r.n_bins * ch;
     // in chunks of attitudes, so that the thin pass holds at most THIN_BYTES of outputs and
     // working memory (and at most THIN_CHUNK attitudes) beside the device's result
-    let per = attitude_bytes(w, inner.samples, ch, r.n_bins, outputs);
+    let per = attitude_bytes(
+        w,
+        inner.samples,
+        ch,
+        r.n_bins,
+        outputs,
+        accumulate::area(&inner, outputs),
+    );
     let chunk = (THIN_BYTES / per.max(1)).clamp(1, THIN_CHUNK);
     for (ci, rots) in rotations.chunks(chunk).enumerate() {
         let first = ci * chunk;
@@ -486,7 +508,15 @@ fn render_pixels(
     // budget; otherwise at most as many at a time as fit, each one's visibility samples
     // and row blocks in parallel
     let threads = rayon::current_num_threads();
-    let at_once = attitudes_at_once(attitude_bytes(w, sensor.samples, ch, nb, outputs), threads);
+    let one = attitude_bytes(
+        w,
+        sensor.samples,
+        ch,
+        nb,
+        outputs,
+        accumulate::area(sensor, outputs),
+    );
+    let at_once = attitudes_at_once(one, threads);
     #[allow(clippy::type_complexity)]
     let per: Vec<(Vec<f32>, Vec<f32>, Vec<f64>, Vec<f64>, Vec<f32>, Vec<f64>)> =
         if at_once >= threads && rotations.len() >= threads {
@@ -630,7 +660,7 @@ mod tests {
         // bytes per pixel, and the profile
         // bytes per pixel, the profile and the total, and 16 row blocks' profiles and
         // weights
-        let b = attitude_bytes(128, 8, 16, 100, all);
+        let b = attitude_bytes(128, 8, 16, 100, all, false);
         let blocks = 16 * (100 * 16 * 8 + 100 * 8);
         assert_eq!(
             b,
@@ -643,17 +673,23 @@ mod tests {
             profile: true,
         };
         assert_eq!(
-            attitude_bytes(128, 8, 16, 100, profile_only),
+            attitude_bytes(128, 8, 16, 100, profile_only, false),
             128 * 128 * 40 + 100 * 16 * 8 + 16 * 8 + blocks
         );
         // many bins at the largest side: the blocks held at once are BLOCKS_AT_ONCE, not
         // all 1024 of them
         assert_eq!(
-            attitude_bytes(8192, 1, 1, 65536, profile_only),
+            attitude_bytes(8192, 1, 1, 65536, profile_only, false),
             8192 * 8192 * 12 + 65536 * 8 + 8 + BLOCKS_AT_ONCE * 65536 * 16
         );
+        // the illuminated area: its moment per bin in the output, and each block's moment
+        // and point scratch
+        assert_eq!(
+            attitude_bytes(128, 8, 16, 100, profile_only, true),
+            128 * 128 * 40 + 100 * 16 * 8 + 16 * 8 + 100 * 8 + blocks + 16 * 2 * 100 * 8
+        );
         // the largest image side at 16 samples (8192^2 x 144 bytes, 9.7 GB): one at a time
-        let big = attitude_bytes(8192, 16, 16, 1000, all);
+        let big = attitude_bytes(8192, 16, 16, 1000, all, false);
         assert!(big > CPU_MEMORY_BUDGET);
         assert_eq!(attitudes_at_once(big, 16), 1);
         // in between: as many as fit
