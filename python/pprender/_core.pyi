@@ -89,18 +89,19 @@ class Material:
     @property
     def f_ms(self) -> float: ...
 
+@final
 class PathBank:
     """Order >= 2 paths traced on Gaussian surfaces (src/brdf/bank.rs; issue 24)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         alpha: float,
         rays: int,
         surfaces: int = 64,
         grid: int = 256,
         correlation_length: float = 8.0,
         seed: int = 1,
-    ) -> None: ...
+    ) -> PathBank: ...
     @property
     def albedo(self) -> npt.NDArray[np.float64]: ...
     @property
@@ -112,8 +113,9 @@ class PathBank:
     def lost(self) -> int: ...
     @property
     def theta(self) -> list[float]: ...
-    def table(self, eta: complex, orders: tuple[int, int] = (2, 2), reciprocal: bool = True) -> OrderTable: ...
+    def table(self, eta: complex, orders: tuple[int, int] = ..., reciprocal: bool = True) -> OrderTable: ...
 
+@final
 class OrderTable:
     """A path bank's Mueller table on (theta_i, theta_o, phi) nodes (src/brdf/bank.rs)."""
 
