@@ -83,13 +83,7 @@ pub fn calibrate_masking(
     assert!(n >= 3 && step > 0.0);
     let scale = surface.spec.distribution.table_scale();
     // the coarse stage: ln s = x at the bank's nodes, Catmull-Rom between
-    let coarse = move |x: &[f64], theta: f64| -> f64 {
-        let u = (theta / step).clamp(0.0, (n - 1) as f64);
-        let i = (u as usize).min(n - 2);
-        let p = |j: isize| x[j.clamp(0, n as isize - 1) as usize];
-        let i = i as isize;
-        masking::catmull_rom(p(i - 1), p(i), p(i + 1), p(i + 2), u - i as f64)
-    };
+    let coarse = move |x: &[f64], theta: f64| masking::catmull_rom_nodes(x, theta / step);
     let thetas: Vec<f64> = (0..n).map(|k| k as f64 * step).collect();
     let table_of = |x: &[f64]| ZTable::build(scale, TABLE_NODES, |t| coarse(x, t).exp());
     let stages = [

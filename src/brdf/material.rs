@@ -312,7 +312,7 @@ impl Material {
                 // linear between their nodes, held beyond the last, as their tables are)
                 let closure = |theta: f64| {
                     let c = theta.cos();
-                    1.0 - so.white_albedo(c) - so.remainder(c)
+                    1.0 - so.orders_albedo(false, c) - so.remainder(c)
                 };
                 let fine: Option<&(dyn Fn(f64) -> f64 + Sync)> =
                     so.rest.is_some().then_some(&closure);
@@ -427,9 +427,7 @@ impl Material {
         // 1 - E_avg directly (it is ~alpha^2 for smooth surfaces: forming E_avg first
         // would leave only its rounding); the white E with the banks' orders
         let deficit = average_over_cosine(n, node, |c, s| {
-            if fresnel {
-                1.0 - table.eval_csz(c, s, z_scaled(scale, c, s))
-            } else if self.surface_orders.is_some() {
+            if !fresnel && self.surface_orders.is_some() {
                 self.remainder_deficit(&table, c, s, None)
             } else {
                 1.0 - table.eval_csz(c, s, z_scaled(scale, c, s))
@@ -550,9 +548,9 @@ impl Material {
     /// the material's Fresnel or with `F = 1`.
     #[inline]
     pub fn bank_albedo(&self, c: f64, fresnel: bool) -> f64 {
-        self.surface_orders.as_ref().map_or(0.0, |so| {
-            so.albedo(Part::Double, fresnel, c) + so.albedo(Part::Rest, fresnel, c)
-        })
+        self.surface_orders
+            .as_ref()
+            .map_or(0.0, |so| so.orders_albedo(fresnel, c))
     }
 
     /// The white (`F = 1`) albedo `E` the multiple term completes to 1: the table `t`

@@ -386,18 +386,14 @@ impl SurfaceOrders {
     /// this, which would carry the banks' interpolation error between their nodes
     /// (periodic in `theta`, up to 5-60 times the truncation itself).
     pub fn remainder(&self, c: f64) -> f64 {
-        let n = N_THETA;
-        let u = (c.clamp(-1.0, 1.0).acos() / THETA_STEP).clamp(0.0, (n - 1) as f64);
-        let i = (u.floor() as usize).min(n - 2) as isize;
-        let p = |j: isize| self.truncated[j.clamp(0, n as isize - 1) as usize];
-        crate::microfacet::masking::catmull_rom(p(i - 1), p(i), p(i + 1), p(i + 2), u - i as f64)
-            .max(0.0)
+        let u = c.clamp(-1.0, 1.0).acos() / THETA_STEP;
+        crate::microfacet::masking::catmull_rom_nodes(&self.truncated, u).max(0.0)
     }
 
-    /// The white (`F = 1`) albedo of the banks' orders at incidence cosine `c` (both parts,
-    /// as the tables interpolate them).
-    pub fn white_albedo(&self, c: f64) -> f64 {
-        self.albedo(Part::Double, false, c) + self.albedo(Part::Rest, false, c)
+    /// The albedo of the banks' orders (both parts, as the tables interpolate them) at
+    /// incidence cosine `c`, with the material's Fresnel or with `F = 1`.
+    pub fn orders_albedo(&self, fresnel: bool, c: f64) -> f64 {
+        self.albedo(Part::Double, fresnel, c) + self.albedo(Part::Rest, fresnel, c)
     }
 
     /// The bank's counted order-1 albedo (`F = 1`) at incidence node `k`.

@@ -414,6 +414,17 @@ pub fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
         + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3)
 }
 
+/// Catmull-Rom through the node values `v` at `u` in node units (`v[k]` at `u = k`), the
+/// ends held (the neighbour beyond an end is the end), `u` clamped to the nodes.
+#[inline]
+pub fn catmull_rom_nodes(v: &[f64], u: f64) -> f64 {
+    let n = v.len();
+    let u = u.clamp(0.0, (n - 1) as f64);
+    let i = (u as usize).min(n - 2) as isize;
+    let p = |j: isize| v[j.clamp(0, n as isize - 1) as usize];
+    catmull_rom(p(i - 1), p(i), p(i + 1), p(i + 2), u - i as f64)
+}
+
 /// Default node count of the per-material masking tables.
 pub const TABLE_NODES: usize = 512;
 /// Gauss-Legendre points per panel of the `N_D` quadrature. Measured: 64 gives relative
