@@ -1,6 +1,6 @@
 # pprender: the two commands of the README.
 #   make demo   set up, then render the default BRDF pictures (the main job)
-#   make test   set up, then cargo test + pytest
+#   make test   set up, then cargo test + pytest (pytest-xdist: a worker per core, up to 4)
 # Set-up is idempotent: apt/pip steps are skipped when their stamp is newer than the
 # files that define them; the extension rebuild is incremental (cargo).
 
@@ -49,8 +49,12 @@ demo: setup
 test-rust: $(STAMP)/apt
 	cargo test --release --quiet
 
+# pytest-xdist workers: one per core, at most 4 (each holds up to about 3 GB); a file's
+# tests stay together on one worker (--dist loadfile: their module fixtures are made once)
+PYTEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ $$n -gt 4 ] && n=4; echo $$n)
+
 test-python: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 
 test: setup test-rust test-python
 

@@ -14,7 +14,9 @@
   for the whole session (``PPRENDER_CACHE_DIR``, set here before anything imports
   pprender, and inherited by the tests' subprocesses; removed at exit): a warm cache in
   the user's ``~/.cache/pprender`` must never hide the cold cost of a bank, and the tests
-  must not fill it.
+  must not fill it. Under pytest-xdist (``make test`` runs a worker per core) the workers share
+  the controller's directory, so a bank one worker traced is read by the others (writes
+  are atomic renames, ``src/brdf/bank/cache.rs``).
 """
 
 from __future__ import annotations
@@ -24,9 +26,14 @@ import os
 import shutil
 import tempfile
 
-_CACHE_DIR = tempfile.mkdtemp(prefix="pprender-test-cache-")
+if os.environ.get("PYTEST_XDIST_WORKER") and os.environ.get("PPRENDER_TEST_CACHE_DIR"):
+    # a pytest-xdist worker: the session's directory, made (and removed) by the controller
+    _CACHE_DIR = os.environ["PPRENDER_TEST_CACHE_DIR"]
+else:
+    _CACHE_DIR = tempfile.mkdtemp(prefix="pprender-test-cache-")
+    os.environ["PPRENDER_TEST_CACHE_DIR"] = _CACHE_DIR
+    atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
 os.environ["PPRENDER_CACHE_DIR"] = _CACHE_DIR
-atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
 
 import glob  # noqa: E402
 import importlib.metadata  # noqa: E402

@@ -10,6 +10,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -59,6 +60,18 @@ def _in_render(main: threading.Thread) -> bool:
     return False
 
 
+@pytest.fixture
+def python_sigint() -> Iterator[None]:
+    """Python's own SIGINT handler (``KeyboardInterrupt``) for the test: a process started
+    in the background by a non-interactive shell (``nohup make test &``) inherits SIGINT
+    ignored, and Python then installs no handler, so a real SIGINT would do nothing there
+    (these tests failed or passed by which other test, a notebook kernel's, had installed
+    one in the same process first)."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
 def _sigint_when(ready, sent: list[float]) -> threading.Thread:
     """A thread that sends SIGINT to the main thread once ``ready()`` holds (polled every 10
     ms, for up to 60 s), recording when in ``sent``."""
@@ -78,7 +91,7 @@ def _sigint_when(ready, sent: list[float]) -> threading.Thread:
 
 @pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="needs signal.pthread_kill (POSIX)")
 @pytest.mark.parametrize("callback", [False, True])
-def test_ctrl_c_stops_a_cpu_render_promptly(callback) -> None:
+def test_ctrl_c_stops_a_cpu_render_promptly(callback, python_sigint) -> None:
     """The f64 CPU twin renders attitudes on rayon's threads. The batch is sized to take
     about 10 s (timed on 4 attitudes), SIGINT arrives 0.3 s into it, and the render must
     end in KeyboardInterrupt within 2 s of it (it used to run to the end first)."""
@@ -109,7 +122,7 @@ def test_ctrl_c_stops_a_cpu_render_promptly(callback) -> None:
 
 
 @pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="needs signal.pthread_kill (POSIX)")
-def test_ctrl_c_stops_the_paths_pass_promptly() -> None:
+def test_ctrl_c_stops_the_paths_pass_promptly(python_sigint) -> None:
     """With bounces = 2 the paths are traced per attitude on rayon's threads after the
     device's pass: SIGINT once the paths pass has begun (the callback has seen more than N)
     stops it within 2 s, though the pass would take about 10 s (timed on 2 attitudes)."""
