@@ -273,6 +273,18 @@ impl Material {
                     "alpha nodes need distribution=\"beckmann\" or \"ggx\" (or alpha_step=None)",
                 ));
             }
+            // (the node tables would replace none of what such a material evaluates: it
+            // was a silent no-op that quadrupled the build time)
+            if spec.orders == Orders::Surface && (spec.terms.double || spec.terms.multiple) {
+                return Err(Error::param(
+                    "alpha_step",
+                    step,
+                    "must be None with orders=\"surface\": the double and multiple terms come \
+                     from the path banks and the single term is calibrated to them at the \
+                     material's own alpha, which tables interpolated between alpha nodes cannot \
+                     stand for",
+                ));
+            }
         }
         let surface_orders =
             if spec.orders == Orders::Surface && (spec.terms.double || spec.terms.multiple) {
@@ -839,6 +851,17 @@ mod tests {
         };
         let e = Material::new(bp).unwrap_err().to_string();
         assert!(e.contains("alpha_step") && e.contains("beckmann"), "{e}");
+        // with orders = Surface the nodes would stand for nothing the material evaluates
+        // (refused before any bank is traced)
+        let surface = MaterialSpec {
+            orders: Orders::Surface,
+            ..spec(0.5, Some(0.05))
+        };
+        let e = Material::new(surface).unwrap_err().to_string();
+        assert!(
+            e.contains("alpha_step") && e.contains("orders=\"surface\""),
+            "{e}"
+        );
     }
 
     /// On a node the tables are that node's (the one weight is 1; ln(1 - x) and back

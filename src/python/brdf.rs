@@ -129,7 +129,11 @@ mod material_args {
 ///     kept (the 64 most recently used). The single term is always exact. For loops and
 ///     fits over alpha with the double or multiple term: the first material in a new
 ///     range of alpha costs four builds, later ones milliseconds (docs/material-build.md
-///     measures both, and the interpolation's error against the exact build).
+///     measures both, and the interpolation's error against the exact build). Refused
+///     with orders="surface" (with the double or multiple term): the banks' orders and
+///     the single term calibrated to them are built at alpha itself, and no node table
+///     would replace any of them. (A fit over alpha interpolates its renders between node
+///     materials instead, Fit's own alpha_step, which does apply to them.)
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise
 /// pprender.Error naming the parameter.
