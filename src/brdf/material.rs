@@ -3,7 +3,6 @@
 
 use super::bank::{N_THETA, THETA_STEP};
 use super::orders::{Part, SurfaceOrders};
-use super::spec::Orders;
 pub use super::spec::{MaterialSpec, Term, Terms};
 pub use super::surface::Surface;
 use crate::microfacet::distribution::{ALPHA_MAX, ALPHA_MIN};
@@ -275,7 +274,7 @@ impl Material {
             }
             // (the node tables would replace none of what such a material evaluates: it
             // was a silent no-op that quadrupled the build time)
-            if spec.orders == Orders::Surface && (spec.terms.double || spec.terms.multiple) {
+            if spec.uses_banks() {
                 return Err(Error::param(
                     "alpha_step",
                     step,
@@ -286,26 +285,25 @@ impl Material {
                 ));
             }
         }
-        let surface_orders =
-            if spec.orders == Orders::Surface && (spec.terms.double || spec.terms.multiple) {
-                let Distribution::Beckmann { alpha } = spec.distribution else {
-                    return Err(Error::param(
-                        "orders",
-                        "\"surface\"",
-                        "the path banks are of Gaussian-correlated Beckmann surfaces: use \
+        let surface_orders = if spec.uses_banks() {
+            let Distribution::Beckmann { alpha } = spec.distribution else {
+                return Err(Error::param(
+                    "orders",
+                    "\"surface\"",
+                    "the path banks are of Gaussian-correlated Beckmann surfaces: use \
                      distribution=\"beckmann\" (or orders=\"seed\")",
-                    ));
-                };
-                Some(std::sync::Arc::new(SurfaceOrders::new(
-                    alpha,
-                    spec.eta,
-                    spec.terms.double,
-                    spec.terms.multiple,
-                    spec.bank_rays,
-                )?))
-            } else {
-                None
+                ));
             };
+            Some(std::sync::Arc::new(SurfaceOrders::new(
+                alpha,
+                spec.eta,
+                spec.terms.double,
+                spec.terms.multiple,
+                spec.bank_rays,
+            )?))
+        } else {
+            None
+        };
         let mut mat = Material {
             surface: Surface::new(spec),
             e_white: None,
@@ -801,6 +799,7 @@ fn alpha_nodes(spec: &MaterialSpec, step: f64) -> Result<Option<Vec<Node>>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::brdf::spec::Orders;
     use crate::brdf::Terms;
 
     fn spec(alpha: f64, step: Option<f64>) -> MaterialSpec {

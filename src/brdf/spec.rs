@@ -206,6 +206,12 @@ impl MaterialSpec {
         }
     }
 
+    /// Whether the orders >= 2 come from the path banks: `orders = Surface` with the
+    /// double or multiple term (with the single term alone `orders` has nothing to do).
+    pub fn uses_banks(&self) -> bool {
+        self.orders == Orders::Surface && (self.terms.double || self.terms.multiple)
+    }
+
     /// Defaults for the double-bounce parameters. `DOUBLE_ORDER`: the quadrature of
     /// `double::eval_double` stays within 1e-4 of the term's M00 against order 384 (max
     /// over the significant pairs of `python benchmarks/bench_double.py`: 1.3e-5, and at most
