@@ -2,11 +2,11 @@
 //! terms need derived from them (albedos, escape after a bounce).
 
 use super::bank::{N_THETA, THETA_STEP};
-use super::orders::{Part, SurfaceOrders};
+use super::orders::{Part, SurfaceOrders, ALPHA_NODES as BANK_ALPHA_NODES};
 pub use super::spec::{MaterialSpec, Term, Terms};
 pub use super::surface::Surface;
 use crate::microfacet::distribution::{ALPHA_MAX, ALPHA_MIN};
-use crate::microfacet::masking::{catmull_rom, ZTable};
+use crate::microfacet::masking::{catmull_rom, ZTable, TABLE_NODES};
 use crate::microfacet::{Distribution, MaskingEval, Shadowing};
 use crate::optics::frames::V3;
 use crate::optics::fresnel::{average_reflectance, Eta};
@@ -165,8 +165,12 @@ impl Material {
     /// from the result; the node materials are kept for the process ([`NODE_CACHE_LEN`]),
     /// so the first material of a new range of alpha costs four builds and later ones
     /// milliseconds. The numbers depend on the nodes only, not on what the process built
-    /// before. `benchmarks/bench_material_build.py` measures the cost and the error against
-    /// the exact build (docs/material-build.md).
+    /// before. With path banks ([`MaterialSpec::uses_banks`]) the banks' orders are still
+    /// mixed at `alpha` itself (cheap once their node tables are built) and the nodes, then
+    /// within the banks' alpha interval ([`bank_alpha_nodes`]), also give the single
+    /// term's calibration ([`interpolate_calibration`]), the slow part of such a build.
+    /// `benchmarks/bench_material_build.py` measures the cost and the error against the
+    /// exact build (docs/material-build.md).
     pub fn new(spec: MaterialSpec) -> Result<Self> {
         spec.distribution.validate()?;
         match spec.eta {
@@ -272,18 +276,6 @@ impl Material {
                     "alpha nodes need distribution=\"beckmann\" or \"ggx\" (or alpha_step=None)",
                 ));
             }
-            // (the node tables would replace none of what such a material evaluates: it
-            // was a silent no-op that quadrupled the build time)
-            if spec.uses_banks() {
-                return Err(Error::param(
-                    "alpha_step",
-                    step,
-                    "must be None with orders=\"surface\": the double and multiple terms come \
-                     from the path banks and the single term is calibrated to them at the \
-                     material's own alpha, which tables interpolated between alpha nodes cannot \
-                     stand for",
-                ));
-            }
         }
         let surface_orders = if spec.uses_banks() {
             let Distribution::Beckmann { alpha } = spec.distribution else {
@@ -313,10 +305,20 @@ impl Material {
             s_fresnel: None,
             surface_orders,
         };
+        let nodes = match mat.spec.alpha_step {
+            Some(step) => alpha_nodes(&mat.spec, step)?,
+            None => None,
+        };
         // the surface's order 1 (`calibration::calibrate_masking`), before any table reads the
-        // masking
+        // masking; from alpha nodes, their calibrations interpolated
         if let Some(so) = mat.surface_orders.clone() {
-            if mat.spec.shadowing != Shadowing::None {
+            if let (Some(nodes), true) = (&nodes, mat.spec.shadowing != Shadowing::None) {
+                mat.surface.calibration = interpolate_calibration(
+                    nodes,
+                    mat.surface.spec.distribution.table_scale(),
+                    &|theta| so.calibration_target(theta),
+                );
+            } else if mat.spec.shadowing != Shadowing::None {
                 let target: Vec<f64> = (0..N_THETA).map(|k| so.order1_target(k)).collect();
                 // with the remainder, the energy balance at every angle (the banks' albedos
                 // linear between their nodes, held beyond the last, as their tables are)
@@ -335,11 +337,9 @@ impl Material {
                 );
             }
         }
-        if let Some(step) = mat.spec.alpha_step {
-            if let Some(nodes) = alpha_nodes(&mat.spec, step)? {
-                mat.interpolate_tables(&nodes);
-                return Ok(mat);
-            }
+        if let Some(nodes) = nodes {
+            mat.interpolate_tables(&nodes);
+            return Ok(mat);
         }
         let needs_albedo = mat.spec.terms.multiple || mat.spec.terms.diffuse;
         let exact = mat.spec.masking == MaskingEval::Exact;
@@ -729,6 +729,123 @@ fn catmull_rom_weights(t: f64) -> [f64; 4] {
     })
 }
 
+/// The alpha nodes of a material whose orders come from the path banks: the interval
+/// `[a_k, a_{k+1}]` of the banks' nodes ([`BANK_ALPHA_NODES`]) that holds `alpha` divided
+/// into `m = ceil(ln(a_{k+1} / a_k) / step)` equal steps in `ln alpha`, and the
+/// Catmull-Rom weights of the four nodes about `alpha` among them (in the end steps a
+/// ghost node extrapolated quadratically from the three nearest, as [`ZTable::eval_z`]
+/// does; linear when `m = 1`). The nodes stay within one interval because the banks'
+/// orders are mixed linearly between their nodes: a material's tables have kinks in
+/// alpha at the banks' nodes, and a stencil across one (nodes `exp(j h)` as for other
+/// materials) missed the white furnace by 5.3e-4 at alpha 0.7013, step 0.02, where one
+/// inside the interval (alpha 0.745) stayed within 1e-5 (default banks).
+/// `None` outside the banks' nodes (the exact build then says why).
+fn bank_alpha_nodes(spec: &MaterialSpec, step: f64) -> Result<Option<Vec<Node>>> {
+    let Some(weights) = bank_node_weights(spec.distribution.scale(), step) else {
+        return Ok(None);
+    };
+    weights
+        .into_iter()
+        .map(|(a, w)| Ok((w, node_material(spec, a)?)))
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
+}
+
+/// The `(alpha node, weight)` pairs of [`bank_alpha_nodes`] (weights not zero), or `None`
+/// for `alpha` outside the banks' nodes.
+fn bank_node_weights(alpha: f64, step: f64) -> Option<Vec<(f64, f64)>> {
+    let a = &BANK_ALPHA_NODES;
+    if !(alpha >= a[0] && alpha <= a[a.len() - 1]) {
+        return None;
+    }
+    let k = a.partition_point(|&x| x <= alpha).clamp(1, a.len() - 1) - 1;
+    let (lo, hi) = (a[k].ln(), a[k + 1].ln());
+    let m = ((hi - lo) / step - 1e-9).ceil().max(1.0) as usize;
+    let node = |i: usize| match i {
+        0 => a[k],
+        _ if i == m => a[k + 1],
+        _ => (lo + (hi - lo) * i as f64 / m as f64).exp(),
+    };
+    let mut t = (alpha.ln() - lo) / (hi - lo) * m as f64;
+    if (t - t.round()).abs() < 1e-9 {
+        t = t.round();
+    }
+    let t = t.clamp(0.0, m as f64);
+    let i = (t.floor() as usize).min(m - 1);
+    let f = t - i as f64;
+    // weights per node index 0..=m
+    let mut w = vec![0.0; m + 1];
+    if f == 0.0 {
+        w[i] = 1.0;
+    } else if f == 1.0 {
+        w[i + 1] = 1.0;
+    } else if m == 1 {
+        w[0] = 1.0 - f;
+        w[1] = f;
+    } else {
+        let cr = catmull_rom_weights(f);
+        w[i] += cr[1];
+        w[i + 1] += cr[2];
+        if i >= 1 {
+            w[i - 1] += cr[0];
+        } else {
+            // p(-1) = 3 p(0) - 3 p(1) + p(2)
+            w[0] += 3.0 * cr[0];
+            w[1] -= 3.0 * cr[0];
+            w[2] += cr[0];
+        }
+        if i + 2 <= m {
+            w[i + 2] += cr[3];
+        } else {
+            // p(m + 1) = 3 p(m) - 3 p(m - 1) + p(m - 2)
+            w[m] += 3.0 * cr[3];
+            w[m - 1] -= 3.0 * cr[3];
+            w[m - 2] += cr[3];
+        }
+    }
+    Some(
+        w.iter()
+            .enumerate()
+            .filter(|(_, &wj)| wj != 0.0)
+            .map(|(j, &wj)| (node(j), wj))
+            .collect(),
+    )
+}
+
+/// The single term's calibration ([`super::calibration::calibrate_masking`]) of a material
+/// between alpha nodes, tabulated on its `z` scale (`scale`): `ln s(theta)` as the nodes'
+/// weighted sum of `ln s_m - ln(T_m) / 2`, plus `ln(T) / 2`, where `T_m` and `T` are the
+/// white single albedos the calibrations aim at (the nodes' and this material's,
+/// [`SurfaceOrders::calibration_target`], exact and cheap at any alpha). `s` enters the
+/// single albedo about twice (incidence and exit), so the target's own curvature in alpha
+/// is followed exactly and only the rest is interpolated. `None` where the nodes have no
+/// calibration.
+fn interpolate_calibration(
+    nodes: &[Node],
+    scale: f64,
+    target: &(dyn Fn(f64) -> f64 + Sync),
+) -> Option<ZTable> {
+    let tables: Vec<(f64, &ZTable, &SurfaceOrders)> = nodes
+        .iter()
+        .map(|(w, m)| Some((*w, m.calibration.as_ref()?, m.surface_orders.as_deref()?)))
+        .collect::<Option<_>>()?;
+    Some(ZTable::build(scale, TABLE_NODES, |theta| {
+        let (s, c) = theta.sin_cos();
+        let half_ln = |t: f64| {
+            if t > 0.0 && t.is_finite() {
+                0.5 * t.ln()
+            } else {
+                0.0
+            }
+        };
+        let shape: f64 = tables
+            .iter()
+            .map(|(w, t, so)| w * (t.eval(c, s).ln() - half_ln(so.calibration_target(theta))))
+            .sum();
+        (shape + half_ln(target(theta))).exp()
+    }))
+}
+
 /// Materials at alpha nodes, kept for the process: the [`NODE_CACHE_LEN`] most recently
 /// used, keyed by their whole spec.
 static NODE_CACHE: std::sync::Mutex<Vec<(String, Arc<Material>)>> =
@@ -774,8 +891,13 @@ fn node_material(spec: &MaterialSpec, alpha: f64) -> Result<Arc<Material>> {
 /// `alpha = exp((j + m - 1) h)`, `m = 0..3`, with their Catmull-Rom weights at `u - j`
 /// (those of weight 0 left out: on a node, that node alone). `None` when a node falls
 /// outside the valid roughness range (the material is then built at its own `alpha`).
+/// A material whose orders come from the path banks takes [`bank_alpha_nodes`] instead.
 fn alpha_nodes(spec: &MaterialSpec, step: f64) -> Result<Option<Vec<Node>>> {
+    if spec.uses_banks() {
+        return bank_alpha_nodes(spec, step);
+    }
     let alpha = spec.distribution.scale();
+    let (lo, hi) = (ALPHA_MIN, ALPHA_MAX);
     let mut u = alpha.ln() / step;
     if (u - u.round()).abs() < 1e-9 {
         u = u.round();
@@ -788,7 +910,7 @@ fn alpha_nodes(spec: &MaterialSpec, step: f64) -> Result<Option<Vec<Node>>> {
             continue;
         }
         let a = ((j + m as f64 - 1.0) * step).exp();
-        if !(ALPHA_MIN..=ALPHA_MAX).contains(&a) {
+        if !(lo..=hi).contains(&a) {
             return Ok(None);
         }
         out.push((w, node_material(spec, a)?));
@@ -850,17 +972,53 @@ mod tests {
         };
         let e = Material::new(bp).unwrap_err().to_string();
         assert!(e.contains("alpha_step") && e.contains("beckmann"), "{e}");
-        // with orders = Surface the nodes would stand for nothing the material evaluates
-        // (refused before any bank is traced)
-        let surface = MaterialSpec {
-            orders: Orders::Surface,
-            ..spec(0.5, Some(0.05))
-        };
-        let e = Material::new(surface).unwrap_err().to_string();
-        assert!(
-            e.contains("alpha_step") && e.contains("orders=\"surface\""),
-            "{e}"
-        );
+    }
+
+    /// The path-bank materials' alpha nodes: within the banks' interval that holds alpha
+    /// (never across a bank node, where the tables have kinks in alpha), weights that sum
+    /// to 1 and reproduce a quadratic in `ln alpha` exactly (Catmull-Rom, with quadratic
+    /// ghosts in the end steps; a linear function where a step spans the whole interval),
+    /// one node alone on a node, none outside the banks' range.
+    #[test]
+    fn bank_alpha_nodes_stay_in_one_interval_and_are_exact_for_quadratics() {
+        for step in [0.02, 0.05, 0.1, 0.3, 1.0] {
+            // steps 0.3 and 1: one step per interval (linear)
+            let c2 = if step < 0.2 { 2.9 } else { 0.0 };
+            let q = |a: f64| {
+                let x = a.ln();
+                0.3 - 1.7 * x + c2 * x * x
+            };
+            for j in 0..=700 {
+                let alpha = 0.3 + 0.001 * j as f64;
+                let w = bank_node_weights(alpha, step).unwrap();
+                let k = BANK_ALPHA_NODES
+                    .iter()
+                    .position(|&a| a > alpha)
+                    .unwrap_or(BANK_ALPHA_NODES.len() - 1)
+                    - 1;
+                let (lo, hi) = (BANK_ALPHA_NODES[k], BANK_ALPHA_NODES[k + 1]);
+                assert!(w.len() <= 4);
+                for &(a, _) in &w {
+                    assert!(
+                        a >= lo * (1.0 - 1e-12) && a <= hi * (1.0 + 1e-12),
+                        "{alpha} {step} {a}"
+                    );
+                }
+                let sum: f64 = w.iter().map(|p| p.1).sum();
+                assert!((sum - 1.0).abs() < 1e-12, "{alpha} {step} {sum}");
+                let v: f64 = w.iter().map(|&(a, wj)| wj * q(a)).sum();
+                assert!(
+                    (v - q(alpha)).abs() < 1e-9,
+                    "{alpha} {step}: {v} vs {}",
+                    q(alpha)
+                );
+            }
+        }
+        for &a in &BANK_ALPHA_NODES {
+            assert_eq!(bank_node_weights(a, 0.05).unwrap(), vec![(a, 1.0)]);
+        }
+        assert!(bank_node_weights(0.2999, 0.05).is_none());
+        assert!(bank_node_weights(1.0001, 0.05).is_none());
     }
 
     /// On a node the tables are that node's (the one weight is 1; ln(1 - x) and back

@@ -390,6 +390,20 @@ impl SurfaceOrders {
         crate::microfacet::masking::catmull_rom_nodes(&self.truncated, u).max(0.0)
     }
 
+    /// The white single albedo that the calibration of the single term aims at, at
+    /// incidence `theta` (rad): with the remainder, what the banks' orders and the light
+    /// past [`MAX_ORDER`] leave, as their tables interpolate them (the calibration's fine
+    /// stage); without it, the bank's counted order 1, Catmull-Rom in `theta` between the
+    /// incidence nodes (as its coarse stage interpolates `ln s`).
+    pub fn calibration_target(&self, theta: f64) -> f64 {
+        if self.rest.is_some() {
+            let c = theta.cos();
+            1.0 - self.orders_albedo(false, c) - self.remainder(c)
+        } else {
+            crate::microfacet::masking::catmull_rom_nodes(&self.order1, theta / THETA_STEP)
+        }
+    }
+
     /// The albedo of the banks' orders (both parts, as the tables interpolate them) at
     /// incidence cosine `c`, with the material's Fresnel or with `F = 1`.
     pub fn orders_albedo(&self, fresnel: bool, c: f64) -> f64 {

@@ -173,7 +173,10 @@ pub struct MaterialSpec {
     /// `Some(h)`: the material's albedo and escape tables are the Catmull-Rom interpolation
     /// in `ln alpha` of those of the materials at the four nodes `alpha = exp(j h)` about
     /// it, built once per process and kept ([`Material::new`](super::material::Material::new)
-    /// says what that costs and changes); `None`: built at `alpha` itself (exact).
+    /// says what that costs and changes); `None`: built at `alpha` itself (exact). With
+    /// path banks ([`Self::uses_banks`]) the nodes also give the single term's calibration
+    /// and lie within the banks' alpha interval that holds `alpha`
+    /// (`material::bank_alpha_nodes`).
     pub alpha_step: Option<f64>,
 }
 

@@ -129,11 +129,14 @@ mod material_args {
 ///     kept (the 64 most recently used). The single term is always exact. For loops and
 ///     fits over alpha with the double or multiple term: the first material in a new
 ///     range of alpha costs four builds, later ones milliseconds (docs/material-build.md
-///     measures both, and the interpolation's error against the exact build). Refused
-///     with orders="surface" (with the double or multiple term): the banks' orders and
-///     the single term calibrated to them are built at alpha itself, and no node table
-///     would replace any of them. (A fit over alpha interpolates its renders between node
-///     materials instead, Fit's own alpha_step, which does apply to them.)
+///     measures both, and the interpolation's error against the exact build). With
+///     orders="surface" (and the double or multiple term) the banks' orders are mixed at
+///     alpha itself as always (milliseconds once the banks' node tables are built) and the
+///     nodes give the single term's calibration to the traced surface (its slow part):
+///     the nodes then divide the interval between the banks' alpha nodes (0.3, 0.4, ...,
+///     1.0) that holds alpha into steps of at most h in ln(alpha), never across a bank
+///     node, and alpha_step is ignored outside [0.3, 1]. (A fit over alpha can instead
+///     interpolate its renders between node materials, Fit's own alpha_step.)
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise
 /// pprender.Error naming the parameter.
