@@ -10,10 +10,10 @@ For each material (the terms that need tables: multiple, double, diffuse):
   error is measured, each in a range of alpha of its own, so that no row finds nodes
   another built.
 - **Error against the exact build** at 5 alphas between nodes (0.0123 to 2.3, none on a
-  node; ``orders="surface"``: 4 alphas in 0.66-0.87), over 1000 random pairs of directions with cosines in [0.02, 1]: the largest
-  ``|f_nodes - f_exact|`` over the 16 Mueller elements relative to
-  ``max(M00_exact, 0.01 /sr)`` (relative where the BRDF matters, absolute below 0.01 /sr:
-  the multiple term of a smooth metal far from its lobe is 1e-25 /sr, and a relative
+  node; ``orders="surface"``: 4 alphas in 0.66-0.87), over 1000 random pairs of
+  directions with cosines in [0.02, 1]: the largest ``|f_nodes - f_exact|`` over the 16
+  Mueller elements relative to ``max(M00_exact, 0.01 /sr)`` (relative where the BRDF
+  matters, absolute below 0.01 /sr: the multiple term of a smooth metal far from its lobe is 1e-25 /sr, and a relative
   error there is noise), and the largest difference of the directional albedo
   (``pprender._core.albedo``, order 128, 30 incidence angles), which is the white-furnace
   error the interpolation adds.

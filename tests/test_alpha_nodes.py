@@ -88,8 +88,8 @@ def test_surface_orders_alpha_nodes_match_the_exact_build_and_conserve_energy(al
     curve more in alpha than the default banks'). Measured at step 0.05 (alpha 0.7013,
     0.745): white albedo within 8.1e-5 and 1.1e-4 of 1 (the exact build's own: 1.1e-4,
     5.1e-5), within 4.7e-5 and 1.1e-4 of the exact build's, BRDF within 7.0e-5 and
-    1.2e-4 (relative to max(M00, 0.01 /sr)); limits about twice to three times those. Alpha 0.7013 sits just above the banks' node 0.7: nodes
-    ``exp(j h)`` as for other materials straddled it and missed the furnace by 5.3e-4 even
+    1.2e-4 (relative to max(M00, 0.01 /sr)); limits about twice to three times those.
+    Alpha 0.7013 sits just above the banks' node 0.7: nodes ``exp(j h)`` as for other materials straddled it and missed the furnace by 5.3e-4 even
     at step 0.02 (default banks); the nodes now stay within [0.7, 0.8]
     (``material::tests::bank_alpha_nodes_stay_in_one_interval_and_are_exact_for_quadratics``)."""
     kw = dict(distribution="beckmann", eta=float("inf"), terms=("single", "double", "multiple"),

@@ -322,10 +322,7 @@ impl Material {
                 let target: Vec<f64> = (0..N_THETA).map(|k| so.order1_target(k)).collect();
                 // with the remainder, the energy balance at every angle (the banks' albedos
                 // linear between their nodes, held beyond the last, as their tables are)
-                let closure = |theta: f64| {
-                    let c = theta.cos();
-                    1.0 - so.orders_albedo(false, c) - so.remainder(c)
-                };
+                let closure = |theta: f64| so.calibration_target(theta);
                 let fine: Option<&(dyn Fn(f64) -> f64 + Sync)> =
                     so.rest.is_some().then_some(&closure);
                 super::calibration::calibrate_masking(
@@ -829,15 +826,15 @@ fn interpolate_calibration(
         .iter()
         .map(|(w, m)| Some((*w, m.calibration.as_ref()?, m.surface_orders.as_deref()?)))
         .collect::<Option<_>>()?;
+    let half_ln = |t: f64| {
+        if t > 0.0 && t.is_finite() {
+            0.5 * t.ln()
+        } else {
+            0.0
+        }
+    };
     Some(ZTable::build(scale, TABLE_NODES, |theta| {
         let (s, c) = theta.sin_cos();
-        let half_ln = |t: f64| {
-            if t > 0.0 && t.is_finite() {
-                0.5 * t.ln()
-            } else {
-                0.0
-            }
-        };
         let shape: f64 = tables
             .iter()
             .map(|(w, t, so)| w * (t.eval(c, s).ln() - half_ln(so.calibration_target(theta))))
@@ -897,7 +894,6 @@ fn alpha_nodes(spec: &MaterialSpec, step: f64) -> Result<Option<Vec<Node>>> {
         return bank_alpha_nodes(spec, step);
     }
     let alpha = spec.distribution.scale();
-    let (lo, hi) = (ALPHA_MIN, ALPHA_MAX);
     let mut u = alpha.ln() / step;
     if (u - u.round()).abs() < 1e-9 {
         u = u.round();
@@ -910,7 +906,7 @@ fn alpha_nodes(spec: &MaterialSpec, step: f64) -> Result<Option<Vec<Node>>> {
             continue;
         }
         let a = ((j + m as f64 - 1.0) * step).exp();
-        if !(lo..=hi).contains(&a) {
+        if !(ALPHA_MIN..=ALPHA_MAX).contains(&a) {
             return Ok(None);
         }
         out.push((w, node_material(spec, a)?));
@@ -921,7 +917,6 @@ fn alpha_nodes(spec: &MaterialSpec, step: f64) -> Result<Option<Vec<Node>>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::brdf::spec::Orders;
     use crate::brdf::Terms;
 
     fn spec(alpha: f64, step: Option<f64>) -> MaterialSpec {

@@ -135,8 +135,8 @@ mod material_args {
 ///     nodes give the single term's calibration to the traced surface (its slow part):
 ///     the nodes then divide the interval between the banks' alpha nodes (0.3, 0.4, ...,
 ///     1.0) that holds alpha into steps of at most h in ln(alpha), never across a bank
-///     node, and alpha_step is ignored outside [0.3, 1]. (A fit over alpha can instead
-///     interpolate its renders between node materials, Fit's own alpha_step.)
+///     node. (A fit over alpha can instead interpolate its renders between node
+///     materials, Fit's own alpha_step.)
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise
 /// pprender.Error naming the parameter.
