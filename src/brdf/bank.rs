@@ -29,6 +29,9 @@
 //! surfaces, start points and azimuths serve every incidence node (common random numbers:
 //! the table is smooth from node to node). Surfaces come from their own seed streams, so a
 //! reference run ([`crate::reference::run`]) with any seed never traces the bank's surfaces.
+//! The paths that leave within [`BACKSCATTER_CONE`] of the backscatter direction are also
+//! kept whole (not thinned) with the displacement from their first hit point to their last
+//! ([`PathBank::backscatter`]): the data of their coherent backscatter ([`coherent`]).
 //!
 //! # The table ([`OrderTable`])
 //! `f_n(wi, wo)` (Mueller, 1/sr) summed over a range of orders `n`, on nodes
@@ -72,6 +75,7 @@ use std::ops::RangeInclusive;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 pub mod cache;
+pub mod coherent;
 pub mod progress;
 
 /// Spacing of the incidence and exit nodes in `theta` (2.5 deg).
@@ -87,6 +91,10 @@ const CHUNK: u64 = 4096;
 pub const MAX_ORDER: usize = 8;
 /// Seed-stream tag of the bank's surfaces and rays (the reference uses 0 and 1).
 const STREAM: u64 = 0x6261_6e6b;
+/// Half-angle (rad) of the cone about the backscatter direction whose paths the bank also
+/// keeps with their separations ([`PathBank::backscatter`]); the reference's coherent tally
+/// uses the same cone in `docs/surface-orders-reference.md`.
+pub const BACKSCATTER_CONE: f64 = 0.1;
 
 /// What to trace.
 #[derive(Debug, Clone, PartialEq)]
@@ -147,12 +155,24 @@ pub struct PathBank {
     /// `weights[node][n - 2]`: the flux each kept order-`n` path stands for, in units of one
     /// primary ray's (1, or more after [`PathBank::thin`]).
     pub weights: Vec<[f64; MAX_ORDER - 1]>,
+    /// `backscatter[node][n - 2]`: every order-`n` path (not thinned, one primary ray each)
+    /// that left within [`BACKSCATTER_CONE`] of the exact backscatter direction, flat: its
+    /// `2 n` facet slopes, then `rho / l` (3 values), the displacement from its first hit
+    /// point to its last in units of the height correlation length, in the frame of
+    /// incidence at azimuth 0 (the coherent-backscatter data: [`coherent`]).
+    pub backscatter: Vec<Vec<Vec<f32>>>,
 }
 
 impl PathBank {
     /// The order-`n` paths of node `i`, each the `2 n` slopes of its facets.
     pub fn paths_of(&self, i: usize, n: usize) -> std::slice::ChunksExact<'_, f32> {
         self.paths[i][n - 2].chunks_exact(2 * n)
+    }
+
+    /// The order-`n` paths of node `i` that left near backscatter ([`Self::backscatter`]),
+    /// each its `2 n` slopes then `rho / l`.
+    pub fn backscatter_of(&self, i: usize, n: usize) -> std::slice::ChunksExact<'_, f32> {
+        self.backscatter[i][n - 2].chunks_exact(2 * n + 3)
     }
 
     /// Keep at most about `cap` paths per node and order (every `k`-th, each then standing
@@ -202,8 +222,14 @@ fn bounce(d: V3, h: V3) -> V3 {
 /// What one primary ray did.
 enum RayFate {
     Lost,
-    /// Left after `n` reflections off the facets with these slopes (the first `2 n` values).
-    Escaped(usize, [f32; 2 * MAX_ORDER]),
+    /// Left after `n` reflections off the facets with these slopes (the first `2 n` values),
+    /// along `k`, its last hit point `rho` (grid cells) from its first.
+    Escaped {
+        n: usize,
+        slopes: [f32; 2 * MAX_ORDER],
+        k: V3,
+        rho: V3,
+    },
     /// Still on the surface after `MAX_ORDER` reflections.
     Truncated,
 }
@@ -217,19 +243,30 @@ fn follow(
     let period = f.n as f64;
     let (mut o, mut d) = (start, neg(wi));
     let mut slopes = [0.0f32; 2 * MAX_ORDER];
+    // the traversal wraps positions into the tile: the separation is the sum of the
+    // segments between hits
+    let mut rho = V3::ZERO;
     for order in 0..=MAX_ORDER {
         match trace_segment(f, o, d, max_cells) {
             Segment::Escaped => {
                 return if order == 0 {
                     RayFate::Lost
                 } else {
-                    RayFate::Escaped(order, slopes)
+                    RayFate::Escaped {
+                        n: order,
+                        slopes,
+                        k: d,
+                        rho,
+                    }
                 }
             }
             Segment::Lost => return RayFate::Lost,
             Segment::Hit { t, plane } => {
                 if order == MAX_ORDER {
                     return RayFate::Truncated;
+                }
+                if order > 0 {
+                    rho += t * d;
                 }
                 o = V3::new(
                     (o[0] + t * d[0]).rem_euclid(period),
@@ -267,6 +304,8 @@ impl PathBank {
         let total = spec.rays * N_THETA as u64;
         let done = AtomicU64::new(0);
         let mut paths = vec![vec![Vec::new(); MAX_ORDER - 1]; N_THETA];
+        let mut backscatter = vec![vec![Vec::new(); MAX_ORDER - 1]; N_THETA];
+        let cos_cone = BACKSCATTER_CONE.cos();
         // per node: rays leaving after 1..=MAX_ORDER reflections, then truncated
         let mut counts = vec![[0u64; MAX_ORDER + 1]; N_THETA];
         let mut lost = 0u64;
@@ -283,15 +322,21 @@ impl PathBank {
             let max_cells = 64 * field.n + 4096;
             let period = field.n as f64;
             let z0 = field.h_max + 1e-3;
-            for (k, (node_paths, node_counts)) in paths.iter_mut().zip(&mut counts).enumerate() {
+            for (k, ((node_paths, node_bs), node_counts)) in paths
+                .iter_mut()
+                .zip(&mut backscatter)
+                .zip(&mut counts)
+                .enumerate()
+            {
                 let wi = node_direction(k);
-                type Chunk = (Vec<Vec<f32>>, [u64; MAX_ORDER + 1], u64);
+                type Chunk = (Vec<Vec<f32>>, Vec<Vec<f32>>, [u64; MAX_ORDER + 1], u64);
                 let chunks: Vec<Chunk> = (0..n_chunks)
                     .into_par_iter()
                     .map(|c| {
                         // the same start points and azimuths at every node (common random numbers)
                         let mut rng = Rng::new(spec.seed, &[STREAM + 1, s, c]);
                         let mut out = vec![Vec::new(); MAX_ORDER - 1];
+                        let mut bs = vec![Vec::new(); MAX_ORDER - 1];
                         let (mut cnt, mut lost) = ([0u64; MAX_ORDER + 1], 0u64);
                         let n_rays = CHUNK.min(rays_s - c * CHUNK);
                         for _ in 0..n_rays {
@@ -303,25 +348,37 @@ impl PathBank {
                             match follow(&field, w, start, max_cells) {
                                 RayFate::Lost => lost += 1,
                                 RayFate::Truncated => cnt[MAX_ORDER] += 1,
-                                RayFate::Escaped(n, p) => {
+                                RayFate::Escaped { n, slopes, k, rho } => {
                                     cnt[n - 1] += 1;
                                     if n >= 2 {
                                         // rotated by -azimuth: incidence at azimuth 0
-                                        for q in p[..2 * n].chunks_exact(2) {
-                                            let (x, y) = (q[0] as f64, q[1] as f64);
-                                            out[n - 2].push((cp * x + sp * y) as f32);
-                                            out[n - 2].push((-sp * x + cp * y) as f32);
+                                        let rot = |x: f64, y: f64| {
+                                            [(cp * x + sp * y) as f32, (-sp * x + cp * y) as f32]
+                                        };
+                                        let start = out[n - 2].len();
+                                        for q in slopes[..2 * n].chunks_exact(2) {
+                                            out[n - 2].extend(rot(q[0] as f64, q[1] as f64));
+                                        }
+                                        if dot(k, w) >= cos_cone {
+                                            let b = &mut bs[n - 2];
+                                            b.extend_from_slice(&out[n - 2][start..]);
+                                            let r = rho / spec.correlation_length;
+                                            b.extend(rot(r[0], r[1]));
+                                            b.push(r[2] as f32);
                                         }
                                     }
                                 }
                             }
                         }
                         progress(done.fetch_add(n_rays, Ordering::Relaxed) + n_rays, total);
-                        (out, cnt, lost)
+                        (out, bs, cnt, lost)
                     })
                     .collect();
-                for (out, cnt, l) in chunks {
+                for (out, bs, cnt, l) in chunks {
                     for (a, b) in node_paths.iter_mut().zip(out) {
+                        a.extend_from_slice(&b);
+                    }
+                    for (a, b) in node_bs.iter_mut().zip(bs) {
                         a.extend_from_slice(&b);
                     }
                     for (a, b) in node_counts.iter_mut().zip(cnt) {
@@ -345,6 +402,7 @@ impl PathBank {
             truncated,
             lost,
             weights: vec![[1.0; MAX_ORDER - 1]; N_THETA],
+            backscatter,
         })
     }
 }

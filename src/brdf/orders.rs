@@ -25,11 +25,12 @@
 //! own tests ignore the environment and keep banks in memory only unless a test sets a
 //! directory.
 
+use super::bank::coherent::CoherentTable;
 use super::bank::progress::Reporter;
 use super::bank::{
     cache, log_mix, BankSpec, OrderTable, PathBank, MAX_ORDER, MIX_FLOOR, N_THETA, THETA_STEP,
 };
-use crate::optics::frames::{Frame, V3};
+use crate::optics::frames::{beam_bases, change_bases, Frame, V3};
 use crate::optics::fresnel::Eta;
 use crate::optics::mueller::Mat4;
 use crate::{Error, Result};
@@ -71,6 +72,8 @@ struct NodeTables {
     /// after [`MAX_ORDER`] reflections (`F = 1`, counted over all primary rays).
     order1: Vec<f64>,
     truncated: Vec<f64>,
+    /// The coherent backscatter of `double` and `rest`, with the material's Fresnel.
+    coherent: [Option<CoherentTable>; 2],
 }
 
 /// The banks kept, by `(node, rays)`, oldest first.
@@ -218,6 +221,14 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
     let double = build(eta, key.double, 2..=2);
     let rest = build(eta, key.multiple, first_rest..=MAX_ORDER);
     let fresnel = [albedos(&double), albedos(&rest)];
+    let coherent_of = |orders: std::ops::RangeInclusive<usize>| {
+        let g = gamma(&b, key.node, key.rays, orders.clone());
+        CoherentTable::build_with(&b, eta, orders, Some(&g))
+    };
+    let coherent = [
+        key.double.then(|| coherent_of(2..=2)),
+        key.multiple.then(|| coherent_of(first_rest..=MAX_ORDER)),
+    ];
     let white = if key.eta.is_none() {
         fresnel.clone()
     } else {
@@ -232,12 +243,36 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
         white,
         order1: b.albedo.iter().map(|a| a[0]).collect(),
         truncated: b.truncated.clone(),
+        coherent,
     });
     tables()
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .insert(key, t.clone());
     Ok(t)
+}
+
+/// The coherent-backscatter `gamma` table of a bank's orders (the same for every material:
+/// [`CoherentTable`]), computed once per process.
+fn gamma(
+    b: &PathBank,
+    node: usize,
+    rays: u64,
+    orders: std::ops::RangeInclusive<usize>,
+) -> Arc<Vec<f64>> {
+    type Gammas = Mutex<HashMap<(usize, u64, usize), Arc<Vec<f64>>>>;
+    static G: OnceLock<Gammas> = OnceLock::new();
+    let key = (node, rays, *orders.start());
+    let cache = G.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Some(g) = cache.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        return g.clone();
+    }
+    let g = Arc::new(CoherentTable::build(b, Eta::PerfectConductor, orders).gamma);
+    cache
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(key, g.clone());
+    g
 }
 
 /// A table's albedo at each incidence node (zeros without the table).
@@ -261,13 +296,15 @@ pub struct SurfaceOrders {
     /// linear in alpha between the nodes.
     order1: Vec<f64>,
     truncated: Vec<f64>,
+    /// The coherent backscatter of `double` and `rest` ([`CoherentTable`]).
+    coherent: [Option<CoherentTable>; 2],
 }
 
 /// Which part's albedo.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Part {
-    Double,
-    Rest,
+    Double = 0,
+    Rest = 1,
 }
 
 impl SurfaceOrders {
@@ -320,6 +357,7 @@ impl SurfaceOrders {
                 white: a.white.clone(),
                 order1: a.order1.clone(),
                 truncated: a.truncated.clone(),
+                coherent: a.coherent.clone(),
             });
         }
         let b = node_tables(key(k0 + 1), eta)?;
@@ -355,6 +393,10 @@ impl SurfaceOrders {
                 .map(|(&u, &v)| (1.0 - w) * u + w * v)
                 .collect()
         };
+        let coherent = [0, 1].map(|p| match (&a.coherent[p], &b.coherent[p]) {
+            (Some(x), Some(y)) => Some(x.mix(y, w)),
+            _ => None,
+        });
         Ok(SurfaceOrders {
             double,
             rest,
@@ -362,6 +404,7 @@ impl SurfaceOrders {
             white,
             order1: lin(&a.order1, &b.order1),
             truncated: lin(&a.truncated, &b.truncated),
+            coherent,
         })
     }
 
@@ -429,6 +472,38 @@ impl SurfaceOrders {
         let k = (t.floor() as usize).min(N_THETA - 2);
         let f = t - k as f64;
         (1.0 - f) * v[k] + f * v[k + 1]
+    }
+
+    /// `part`'s coherent-backscatter decorrelation `gamma(q)` at `(wi, wo)`
+    /// ([`CoherentTable`]; `wavelength` and the height correlation length `l` in one unit):
+    /// 1 at exact backscatter, 0 far from it or when the part is not enabled.
+    pub fn coherent_gamma(&self, part: Part, wi: V3, wo: V3, wavelength: f64, l: f64) -> f64 {
+        self.coherent[part as usize]
+            .as_ref()
+            .and_then(|t| t.eval(wi, wo, wavelength, l))
+            .map_or(0.0, |(g, _, _)| g)
+    }
+
+    /// `part`'s coherent-backscatter term (1/sr) at `(wi, wo)` in `frame`,
+    /// `gamma(q) R M00` with `m00` the part's incoherent `M00` there ([`CoherentTable`]);
+    /// `None` where it is 0.
+    #[allow(clippy::too_many_arguments)]
+    pub fn coherent(
+        &self,
+        part: Part,
+        wi: V3,
+        wo: V3,
+        frame: Frame,
+        wavelength: f64,
+        l: f64,
+        m00: f64,
+    ) -> Option<Mat4> {
+        let (g, r, bases) = self.coherent[part as usize]
+            .as_ref()?
+            .eval(wi, wo, wavelength, l)?;
+        let s = g * m00;
+        let m: Mat4 = r.map(|row| row.map(|x| s * x));
+        Some(change_bases(&m, bases, beam_bases(frame, wi, wo)))
     }
 
     /// `part`'s Mueller BRDF (1/sr) in `frame`; zero when the part is not enabled.

@@ -164,7 +164,10 @@ pub struct MaterialSpec {
     pub double_correlated: bool,
     /// Wavelength (m), for the coherent-backscatter width.
     pub wavelength: f64,
-    /// Surface correlation length (m): rms lateral separation of the two facets.
+    /// Surface correlation length (m): with [`Orders::Seed`] the rms lateral separation of
+    /// the double bounce's two facets; with [`Orders::Surface`] the height correlation
+    /// length `l` of the banked surfaces (`C(r) ~ exp(-r^2 / l^2)`), which scales the
+    /// banked separations ([`crate::brdf::bank::coherent`]).
     pub correlation_length: f64,
     /// Where orders >= 2 come from.
     pub orders: Orders,

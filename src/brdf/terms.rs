@@ -5,7 +5,7 @@
 //! [`super::double`], [`super::albedo`](mod@super::albedo)) and the [`Material`] built on them.
 
 use super::albedo::single_albedo;
-use super::double::{cbe_gamma, eval_double_framed};
+use super::double::eval_double_framed;
 use super::material::Material;
 use super::orders::Part;
 use super::single::single_term;
@@ -40,7 +40,14 @@ pub fn sum_terms_except(mat: &Material, wi: V3, wo: V3, frame: Frame, skip: Opti
             Term::Double => add(&mut m, &double_term(mat, wi, wo, frame)),
             Term::Multiple => {
                 if let Some(so) = &mat.surface_orders {
-                    add(&mut m, &so.eval(Part::Rest, wi, wo, frame));
+                    let rest = so.eval(Part::Rest, wi, wo, frame);
+                    add(&mut m, &rest);
+                    if mat.spec.coherent_backscatter {
+                        let (wl, l) = (mat.spec.wavelength, mat.spec.correlation_length);
+                        if let Some(c) = so.coherent(Part::Rest, wi, wo, frame, wl, l, rest[0][0]) {
+                            add(&mut m, &c);
+                        }
+                    }
                 }
                 m[0][0] += mat.multiple_cz(ci, zi, co, zo)
             }
@@ -62,14 +69,18 @@ fn add(m: &mut Mat4, b: &Mat4) {
 /// `orders = Surface` the path bank's order 2 times `1 + gamma`, its coherent backscatter
 /// (an order-2 backscatter path and its reverse have the same Jones matrix in
 /// backscatter-aligned frames, so the pair's interference adds `gamma` times the
-/// incoherent value in every element; `gamma` as in [`crate::brdf::double::cbe_gamma`]).
+/// incoherent value in every element; `gamma(q)` the characteristic function of the
+/// banked paths' separations, [`crate::brdf::bank::coherent`]). The orders beyond
+/// (the multiple term's banked part) add `gamma R M00` there, `R` their interference
+/// matrix at backscatter.
 pub fn double_term(mat: &Material, wi: V3, wo: V3, frame: Frame) -> Mat4 {
     match &mat.surface_orders {
         None => eval_double_framed(mat, wi, wo, frame),
         Some(so) => {
             let mut m = so.eval(Part::Double, wi, wo, frame);
             if mat.spec.coherent_backscatter {
-                let g = cbe_gamma(mat.spec.wavelength, mat.spec.correlation_length, wi, wo);
+                let (wl, l) = (mat.spec.wavelength, mat.spec.correlation_length);
+                let g = so.coherent_gamma(Part::Double, wi, wo, wl, l);
                 m.iter_mut().flatten().for_each(|x| *x *= 1.0 + g);
             }
             m

@@ -86,9 +86,15 @@ mod material_args {
 /// name: a label (pprender.materials sets the material's name).
 /// double_order: quadrature order of the double-bounce integral (per dimension; default
 ///     160, within 1e-4 of the term's M00 on docs/double-bounce-benchmark.md's pairs).
-/// coherent_backscatter: add the coherent-backscatter enhancement to the double bounce,
-///     with width set by ``wavelength`` (m) and ``correlation_length`` (m, the rms
-///     lateral separation of the two facets).
+/// coherent_backscatter: add the coherent-backscatter enhancement, with width set by
+///     ``wavelength`` (m) and ``correlation_length`` (m). With orders="seed": to the
+///     double bounce, ``correlation_length`` the rms lateral separation of the two facets
+///     (a Gaussian). With orders="surface": to order 2 (2x at backscatter in every
+///     element) and to the orders beyond (less than 2x in some channels), each path
+///     with its reverse as the banked surface has them, ``correlation_length`` the
+///     surface's height correlation length l (C(r) ~ exp(-r^2 / l^2)); the width comes
+///     from the paths' 3D separations (src/brdf/bank/coherent.rs; against the explicit
+///     surface: docs/coherent-backscatter.md).
 /// double_masking: "seed" (the material's correlated masking in the double bounce's
 ///     hit/escape probabilities: seed eq. 17, made reciprocal) or "uncorrelated".
 /// wavelength: the wavelength (m) ``eta`` is for; :func:`pprender.render` refuses a

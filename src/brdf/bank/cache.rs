@@ -13,9 +13,10 @@
 //! (`alpha` `f64`, `grid` `u64`, `correlation_length` `f64`, `rays` `u64`, `surfaces` `u32`,
 //! `seed` `u64`), `lost` (`u64`); per incidence node its rays (`u64`), albedos
 //! (`MAX_ORDER` `f64`), truncated fraction (`f64`), weights (`MAX_ORDER - 1` `f64`) and the
-//! lengths of its path arrays (`MAX_ORDER - 1` `u64`, in `f32` values); then the path arrays
-//! (`f32`), node by node, order by order; last a checksum (`u64`, [`Checksum`]) of
-//! everything before it.
+//! lengths of its path arrays and of its backscatter arrays (`MAX_ORDER - 1` `u64` each, in
+//! `f32` values); then the path arrays (`f32`), node by node, order by order, then the
+//! backscatter arrays likewise; last a checksum (`u64`, [`Checksum`]) of everything before
+//! it.
 //!
 //! # Trust
 //! [`PathBank::read_from`] rejects, with the reason, a file whose magic, format, version,
@@ -41,7 +42,7 @@ use std::time::{Duration, SystemTime};
 /// The first bytes of an entry.
 const MAGIC: [u8; 8] = *b"PPRBANK\n";
 /// The layout's version (module docs); bump it with any change of the layout.
-pub const FORMAT: u32 = 1;
+pub const FORMAT: u32 = 2;
 /// The longest version string a reader accepts.
 const MAX_VERSION_LEN: u32 = 256;
 /// Entry files end with this.
@@ -206,7 +207,12 @@ fn encode<W: Write>(bank: &PathBank, cap: usize, version: &str, out: W) -> io::R
         || bank.albedo.len() != N_THETA
         || bank.truncated.len() != N_THETA
         || bank.weights.len() != N_THETA
-        || bank.paths.iter().any(|p| p.len() != MAX_ORDER - 1)
+        || bank.backscatter.len() != N_THETA
+        || bank
+            .paths
+            .iter()
+            .chain(&bank.backscatter)
+            .any(|p| p.len() != MAX_ORDER - 1)
     {
         return Err(bad(
             "a path bank without N_THETA nodes of MAX_ORDER - 1 orders",
@@ -243,12 +249,12 @@ fn encode<W: Write>(bank: &PathBank, cap: usize, version: &str, out: W) -> io::R
         for x in bank.weights[i] {
             w.write_all(&x.to_le_bytes())?;
         }
-        for p in &bank.paths[i] {
+        for p in bank.paths[i].iter().chain(&bank.backscatter[i]) {
             w.write_all(&(p.len() as u64).to_le_bytes())?;
         }
     }
     let mut bytes = Vec::new();
-    for p in bank.paths.iter().flatten() {
+    for p in bank.paths.iter().chain(&bank.backscatter).flatten() {
         bytes.clear();
         bytes.extend(p.iter().flat_map(|x| x.to_le_bytes()));
         w.write_all(&bytes)?;
@@ -265,7 +271,7 @@ fn fixed_header_len(version_len: u64) -> u64 {
 }
 
 /// The bytes of one node's record.
-const NODE_RECORD: u64 = 8 + 8 * MAX_ORDER as u64 + 8 + 8 * (MAX_ORDER as u64 - 1) * 2;
+const NODE_RECORD: u64 = 8 + 8 * MAX_ORDER as u64 + 8 + 8 * (MAX_ORDER as u64 - 1) * 3;
 
 /// A reader that sums what passes through it.
 struct SummedReader<R> {
@@ -393,14 +399,14 @@ fn decode<R: Read>(
             *x = r.f64()?;
         }
         weights.push(w);
-        let mut l = [0u64; MAX_ORDER - 1];
+        // the path arrays' lengths, then the backscatter arrays'
+        let mut l = [0u64; 2 * (MAX_ORDER - 1)];
         for (k, x) in l.iter_mut().enumerate() {
             *x = r.u64()?;
-            if *x % (2 * (k as u64 + 2)) != 0 {
-                return Err(format!(
-                    "node {i} order {}: {x} values, not whole paths",
-                    k + 2
-                ));
+            let n = (k % (MAX_ORDER - 1)) as u64 + 2;
+            let per_path = if k < MAX_ORDER - 1 { 2 * n } else { 2 * n + 3 };
+            if *x % per_path != 0 {
+                return Err(format!("node {i} order {n}: {x} values, not whole paths"));
             }
             data_bytes = x
                 .checked_mul(4)
@@ -429,8 +435,13 @@ fn decode<R: Read>(
         ));
     }
     let mut paths = Vec::with_capacity(N_THETA);
+    let mut backscatter = Vec::with_capacity(N_THETA);
     let mut bytes = Vec::new();
-    for l in &lens {
+    let halves = lens
+        .iter()
+        .map(|l| &l[..MAX_ORDER - 1])
+        .chain(lens.iter().map(|l| &l[MAX_ORDER - 1..]));
+    for (h, l) in halves.enumerate() {
         let mut node = Vec::with_capacity(MAX_ORDER - 1);
         for &len in l {
             bytes.resize(4 * len as usize, 0);
@@ -442,7 +453,11 @@ fn decode<R: Read>(
                     .collect::<Vec<f32>>(),
             );
         }
-        paths.push(node);
+        if h < N_THETA {
+            paths.push(node);
+        } else {
+            backscatter.push(node);
+        }
     }
     let sum = r.sum.finish();
     let mut stored = [0u8; 8];
@@ -460,6 +475,7 @@ fn decode<R: Read>(
         truncated,
         lost,
         weights,
+        backscatter,
     })
 }
 

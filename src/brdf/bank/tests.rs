@@ -52,7 +52,7 @@ fn node_symmetries_hold_for_the_double_term() {
     }
 }
 
-fn bank() -> &'static PathBank {
+pub(crate) fn bank() -> &'static PathBank {
     static B: OnceLock<PathBank> = OnceLock::new();
     B.get_or_init(|| {
         PathBank::trace(&BankSpec {
