@@ -266,10 +266,17 @@ def page(rows: Sequence[Dict[str, Any]], argv: Sequence[str], seconds: float, ra
     for r in rows:
         k = r["worst"]
         se = float(np.max(np.diagonal(r["r_se"])))
+        if r["i00"] <= 0:
+            # no paths of this order near backscatter in the reference
+            out.append(f"| {r['alpha']:g} | {r['theta']:g} | {r['material']} | {r['order']} | 0 | "
+                       "– | – | – | – | – | – | – | – | – | – | – |")
+            continue
         w = []
         for az, _ in AZIMUTHS:
             w_ref, w_se, w_mod = r[f"w_{az}"]
-            w += [f"{w_ref:.4f}±{w_se:.4f} / {w_mod:.4f}", r[f"w_{az}_verdict"]]
+            f = (lambda x: f"{x:.4f}" if math.isfinite(x) else "–")
+            ref_s = f"{f(w_ref)}±{f(w_se)}" if math.isfinite(w_ref) else "–"
+            w += [f"{ref_s} / {f(w_mod)}", r[f"w_{az}_verdict"]]
         out.append(
             f"| {r['alpha']:g} | {r['theta']:g} | {r['material']} | {r['order']} | {r['i00']:.3g} | "
             f"{diag(r['r_ref'])} ±{se:.3f} | {diag(r['r_mod'])} | M{k[0]}{k[1]} {r['r_ref'][k]:+.3f} / "

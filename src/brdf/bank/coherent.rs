@@ -225,7 +225,7 @@ fn node(
     let e = V3::Y;
     let mut inter = [[0.0; 4]; 4];
     let mut m00 = 0.0;
-    let mut gsum = vec![0.0; N_PSI * N_U];
+    let mut gsum = vec![0.0; if with_gamma { N_PSI * N_U } else { 0 }];
     let mut wsum = 0.0;
     let (mut used, mut unpaired) = (0u64, 0u64);
     let mut hs = [V3::Z; MAX_ORDER];
@@ -291,7 +291,8 @@ fn node(
     if m00 > 0.0 {
         for r in 0..4 {
             for c in 0..4 {
-                // reciprocity at backscatter: R = E R^T E
+                // reciprocity with the mirror of the plane of incidence (the tables' node
+                // symmetry, bank module docs): R = E R^T E at backscatter
                 ratio[r][c] = 0.5 * (inter[r][c] + E[r] * E[c] * inter[c][r]) / m00;
             }
         }
