@@ -218,7 +218,7 @@ pub fn cbe_gamma(wavelength: f64, correlation_length: f64, wi: V3, wo: V3) -> f6
 
 /// `M(J + J') - M(J) - M(J')`: the interference of two amplitudes.
 #[inline]
-fn interference(j: &Jones, jr: &Jones) -> Mat4 {
+pub(crate) fn interference(j: &Jones, jr: &Jones) -> Mat4 {
     let mut s = *j;
     for a in 0..2 {
         for b in 0..2 {

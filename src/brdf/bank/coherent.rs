@@ -48,9 +48,10 @@
 
 use super::{bounce, facet, THETA_STEP};
 use super::{node_direction, path_jones, zero_mirror_odd, PathBank, E, MAX_ORDER, N_THETA};
+use crate::brdf::double::interference;
 use crate::optics::frames::{cross, dot, neg, normalize, V3};
 use crate::optics::fresnel::Eta;
-use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
+use crate::optics::mueller::{jones_to_mueller, Mat4};
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::ops::RangeInclusive;
@@ -85,6 +86,11 @@ pub fn aligned_bases(e: V3, wi: V3, wo: V3) -> Bases {
     let x_in = normalize(e - dot(e, wi) * wi);
     let x_out = neg(normalize(e - dot(e, wo) * wo));
     (x_in, cross(neg(wi), x_in), x_out, cross(wo, x_out))
+}
+
+/// `(1 - w) a + w b`, element by element.
+fn lerp(a: &Mat4, b: &Mat4, w: f64) -> Mat4 {
+    std::array::from_fn(|r| std::array::from_fn(|c| (1.0 - w) * a[r][c] + w * b[r][c]))
 }
 
 /// Where light arriving along `-wi` leaves after the facets `hs`.
@@ -143,9 +149,7 @@ impl CoherentTable {
                 .ratio
                 .iter()
                 .zip(&other.ratio)
-                .map(|(a, b)| {
-                    std::array::from_fn(|r| std::array::from_fn(|c| lin(a[r][c], b[r][c])))
-                })
+                .map(|(a, b)| lerp(a, b, w))
                 .collect(),
             gamma: self
                 .gamma
@@ -180,13 +184,7 @@ impl CoherentTable {
     /// `gamma(q)` and `R` at `(wi, wo)` (module docs, "Evaluation") for wavelength and
     /// height correlation length `l` (same unit), with the bases `R` is given in
     /// ([`aligned_bases`]); `None` where `gamma` is 0.
-    pub fn eval(
-        &self,
-        wi: V3,
-        wo: V3,
-        wavelength: f64,
-        l: f64,
-    ) -> Option<(f64, Mat4, Bases)> {
+    pub fn eval(&self, wi: V3, wo: V3, wavelength: f64, l: f64) -> Option<(f64, Mat4, Bases)> {
         let theta = 0.5 * (wi[2].clamp(-1.0, 1.0).acos() + wo[2].clamp(-1.0, 1.0).acos());
         let t = (theta / THETA_STEP).clamp(0.0, (N_THETA - 1) as f64);
         let i = (t as usize).min(N_THETA - 2);
@@ -208,7 +206,7 @@ impl CoherentTable {
             return None;
         }
         let (a, b) = (&self.ratio[i], &self.ratio[i + 1]);
-        let r = std::array::from_fn(|x| std::array::from_fn(|y| (1.0 - f) * a[x][y] + f * b[x][y]));
+        let r = lerp(a, b, f);
         Some((g, r, aligned_bases(e_y, wi, wo)))
     }
 }
@@ -254,12 +252,9 @@ fn node(
                 unpaired += 1;
                 continue;
             };
-            let sum: Jones = std::array::from_fn(|a| std::array::from_fn(|b| j[a][b] + jr[a][b]));
-            let (ms, mr) = (jones_to_mueller(&sum), jones_to_mueller(&jr));
-            for r in 0..4 {
-                for c in 0..4 {
-                    inter[r][c] += 0.5 * (ms[r][c] - m[r][c] - mr[r][c]);
-                }
+            let x = interference(&j, &jr);
+            for (a, b) in inter.iter_mut().flatten().zip(x.iter().flatten()) {
+                *a += 0.5 * b;
             }
             if !with_gamma {
                 continue;
