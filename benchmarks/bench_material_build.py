@@ -45,7 +45,7 @@ MATERIALS = [
      dict(distribution="beckmann", eta=1.38 + 10.2j, terms=["single", "double", "multiple"], orders="surface")),
 ]
 ALPHAS = (0.0123, 0.137, 0.331, 0.77, 2.3)
-#: orders="surface" exists for alpha in [0.3, 1] (path banks at 0.3, 0.4, ..., 1.0): its
+#: orders="surface" exists for alpha in [0.05, 1] (path banks at 0.05, ..., 0.3, 0.4, ..., 1.0): its
 #: rows time and measure within [0.6, 0.9], where the banks are traced first (kept on disk)
 SURFACE_ALPHAS = (0.66, 0.73, 0.77, 0.87)
 SURFACE_STARTS = {0.05: 0.62, 0.1: 0.83}

@@ -76,7 +76,7 @@ EXITS: Tuple[Tuple[str, float, float], ...] = (
     ("in30", 30.0, math.pi),
     ("out30", 30.0, math.pi / 2),
 )
-SURFACE_RANGE = (0.3, 1.0)  # orders="surface" exists here only
+SURFACE_RANGE = (0.05, 1.0)  # orders="surface" exists here only
 MODES = ("surface", "seed")
 # Tolerances of the issue's Targets.
 TOL = {"o2_m00": 0.10, "o2_norm": 0.05, "o3_m00": 0.25, "o3_di": 0.10, "whole_di": 0.03}
@@ -452,7 +452,7 @@ def model_materials(alpha: float, eta: complex, mode: str,
             kw["bank_rays"] = bank_rays
         try:
             _MATS[key] = {n: pprender.Material("beckmann", terms=terms, **kw) for n, terms in TERM_SETS.items()}
-        except pprender.Error:  # orders="surface" outside alpha [0.3, 1]
+        except pprender.Error:  # orders="surface" outside alpha [0.05, 1]
             _MATS[key] = None
     return _MATS[key]
 
@@ -791,7 +791,8 @@ def page(res: Dict[str, Any], argv: Sequence[str], cells_requested: Sequence[Cel
       "calibrated to the bank's order 1 along with the banks; `orders=\"seed\"` has no calibration and takes "
       "terms (single,), the same sum), order 2 = (double,), 3+ = (double, multiple) - "
       "(double,), whole = (single, "
-      'double, multiple). `orders="surface"` exists for alpha in [0.3, 1] only (n/a elsewhere)'
+      f'double, multiple). `orders="surface"` exists for alpha in [{SURFACE_RANGE[0]:g}, {SURFACE_RANGE[1]:g}] only '
+      '(n/a elsewhere)'
       + (f"; path banks of {s.bank_rays:.0e} rays per incidence node" if s.bank_rays else
          "; path banks at their default size") + ".")
     a(f"- Scoring (issue 24, Targets): a row is scored only where the reference's se(M00) <= {s.se_target:.0%} of "
@@ -803,13 +804,14 @@ def page(res: Dict[str, Any], argv: Sequence[str], cells_requested: Sequence[Cel
     a("## Summary: pass rates")
     a("")
     a("Entries `passes/scored (passes + within 2 se)`; – where nothing was scored (for surface: alpha outside "
-      "[0.3, 1], or no scored row).")
+      f"[{SURFACE_RANGE[0]:g}, {SURFACE_RANGE[1]:g}], or no scored row).")
     a("")
     a("### By alpha")
     a("")
     w.extend(summary_table(summary(rows, lambda c: c.alpha), "alpha", lambda g: f"{g:g}"))
     allg = summary(rows, lambda c: "all")
-    rng = summary(rows, lambda c: "alpha in [0.3, 1]" if SURFACE_RANGE[0] <= c.alpha <= SURFACE_RANGE[1] else None)
+    label = f"alpha in [{SURFACE_RANGE[0]:g}, {SURFACE_RANGE[1]:g}]"
+    rng = summary(rows, lambda c: label if SURFACE_RANGE[0] <= c.alpha <= SURFACE_RANGE[1] else None)
     rng.pop(None, None)
     w.extend(summary_table({**rng, **allg}, "alpha", str)[2:])
     a("")

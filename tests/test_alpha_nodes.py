@@ -86,9 +86,13 @@ def test_surface_orders_alpha_nodes_match_the_exact_build_and_conserve_energy(al
     (F = 1: single + orders 2-8 + the remainder past them is the whole light, an analytic
     limit) and BRDF, with 2e4-ray banks (the tests' size; their orders mixed in ln M00
     curve more in alpha than the default banks'). Measured at step 0.05 (alpha 0.7013,
-    0.745): white albedo within 8.1e-5 and 1.1e-4 of 1 (the exact build's own: 1.1e-4,
-    5.1e-5), within 4.7e-5 and 1.1e-4 of the exact build's, BRDF within 7.0e-5 and
-    1.2e-4 (relative to max(M00, 0.01 /sr)); limits about twice to three times those.
+    0.745): white albedo within 7.3e-5 and 2.0e-4 of 1 (the exact build's own: 1.0e-4,
+    2.1e-5), within 3.8e-5 and 2.1e-4 of the exact build's, BRDF within 7.0e-5 and
+    4.0e-4 (relative to max(M00, 0.01 /sr)); limits 1.5 to 4 times those. (Before the
+    banks' tables were interpolated along the similarity, src/brdf/orders/similar.rs,
+    0.745 gave 1.1e-4, 1.1e-4 and 1.2e-4: the similar angles are read between the
+    tables' incidence nodes linearly, so the calibration's target has kinks in alpha
+    inside an interval too, where the angles cross nodes, which the nodes round.)
     Alpha 0.7013 sits just above the banks' node 0.7: nodes ``exp(j h)`` as for other materials straddled it and missed the furnace by 5.3e-4 even
     at step 0.02 (default banks); the nodes now stay within [0.7, 0.8]
     (``material::tests::bank_alpha_nodes_stay_in_one_interval_and_are_exact_for_quadratics``)."""
@@ -103,8 +107,8 @@ def test_surface_orders_alpha_nodes_match_the_exact_build_and_conserve_energy(al
     fe, fi = _core.brdf(exact, wi, wo, "sp"), _core.brdf(nodes, wi, wo, "sp")
     err = np.abs(fi - fe).max(axis=(1, 2)) / np.maximum(fe[:, 0, 0], 1e-2)
     assert np.abs(e_exact - 1.0).max() < 2e-4
-    assert 0.0 < np.abs(e_nodes - e_exact).max() < 2.5e-4 and np.abs(e_nodes - 1.0).max() < 3e-4
-    assert err.max() < 3e-4
+    assert 0.0 < np.abs(e_nodes - e_exact).max() < 3.5e-4 and np.abs(e_nodes - 1.0).max() < 3e-4
+    assert err.max() < 6e-4
     # with the single term alone orders has nothing to do and the nodes apply as usual
     single = dict(ALUMINIUM, terms=("single",))
     m = pprender.Material(alpha=0.77, alpha_step=0.05, orders="surface", bank_rays=20_000, **single)

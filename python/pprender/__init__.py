@@ -228,8 +228,9 @@ def set_cache_dir(path: str | os.PathLike[str] | None) -> None:
     """Set where path banks (``Material(..., orders="surface")``) are cached on disk.
 
     A path bank (one per alpha node and ``bank_rays``) takes about a minute per node to
-    trace on 2 cores at the default rays, and 0.1-0.3 GB on disk (147 MB at alpha 0.5,
-    about 1.5 GB for all eight nodes); it is traced once per
+    trace on 2 cores at the default rays, and 0.1-0.3 GB on disk at alpha 0.3-1 (147 MB
+    at alpha 0.5, about 1.5 GB for those eight nodes; the six nodes below 0.3 are
+    smaller and faster); it is traced once per
     machine, on first use, with a progress line on stderr (none when the environment
     variable ``PPRENDER_PROGRESS`` is ``0``), and read back by later processes. An entry
     that is missing, corrupt, or made by another pprender version or for other

@@ -977,14 +977,18 @@ mod tests {
     #[test]
     fn bank_alpha_nodes_stay_in_one_interval_and_are_exact_for_quadratics() {
         for step in [0.02, 0.05, 0.1, 0.3, 1.0] {
-            // steps 0.3 and 1: one step per interval (linear)
+            // steps 0.3 and 1: one or two steps per interval (a linear function)
             let c2 = if step < 0.2 { 2.9 } else { 0.0 };
             let q = |a: f64| {
                 let x = a.ln();
                 0.3 - 1.7 * x + c2 * x * x
             };
-            for j in 0..=700 {
-                let alpha = 0.3 + 0.001 * j as f64;
+            let (first, last) = (
+                BANK_ALPHA_NODES[0],
+                BANK_ALPHA_NODES[BANK_ALPHA_NODES.len() - 1],
+            );
+            for j in 0..=1000 {
+                let alpha = (first * (last / first).powf(j as f64 / 1000.0)).min(last);
                 let w = bank_node_weights(alpha, step).unwrap();
                 let k = BANK_ALPHA_NODES
                     .iter()
@@ -1012,7 +1016,7 @@ mod tests {
         for &a in &BANK_ALPHA_NODES {
             assert_eq!(bank_node_weights(a, 0.05).unwrap(), vec![(a, 1.0)]);
         }
-        assert!(bank_node_weights(0.2999, 0.05).is_none());
+        assert!(bank_node_weights(0.0499, 0.05).is_none());
         assert!(bank_node_weights(1.0001, 0.05).is_none());
     }
 

@@ -8,9 +8,13 @@
 //! (3..=8 with "double", 2..=8 without) when "multiple" is on; plus, per incidence node,
 //! their albedos with the material's Fresnel and with `F = 1` (from perfect-conductor
 //! tables), which the multiple term's depolarizing remainder and the diffuse layer need.
-//! A material between two nodes takes the two nodes' tables interpolated in alpha
-//! ([`OrderTable::mix`]: `ln M00` and the normalized elements linearly), and the albedos
-//! of the mixed tables (so the energy balance holds at any alpha).
+//! A material between two nodes takes the two nodes' tables interpolated in alpha along
+//! the surface's small-slope similarity ([`similar::mix`]: `M00` read at the angles with
+//! the same `cot(theta) / alpha` and mixed in `ln M00`, the normalized elements mixed at
+//! the actual angles; the per-incidence albedos with `F = 1` and of order 1 read the same
+//! way, [`similar::mix_nodes`]), and the albedos of the mixed tables (so the energy balance
+//! holds at any alpha). The nodes below 0.3 are denser: there orders >= 2 live toward
+//! grazing incidence in lobes that move with alpha.
 //!
 //! Both caches (banks, node tables) live for the process, and banks are also kept on disk
 //! ([`super::bank::cache`]) in the directory [`cache_dir`] names, so that a new process
@@ -39,8 +43,12 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 
+pub mod similar;
+
 /// The roughness nodes of the path banks (Beckmann alpha).
-pub const ALPHA_NODES: [f64; 8] = [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0];
+pub const ALPHA_NODES: [f64; 14] = [
+    0.05, 0.075, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0,
+];
 /// Paths kept per incidence node and order ([`PathBank::thin`]).
 pub const PATH_CAP: usize = 300_000;
 /// Banks kept in memory at once (each up to a few hundred MB).
@@ -318,7 +326,8 @@ impl SurfaceOrders {
                 alpha,
                 format!(
                     "orders=\"surface\" has path banks for Beckmann alpha in [{lo}, {hi}] \
-                     (below {lo}, orders >= 2 are small except near grazing; use orders=\"seed\")"
+                     (below {lo}, orders >= 2 exist only within about 10 deg of grazing, finer \
+                     than the tables' 2.5 deg incidence nodes; use orders=\"seed\")"
                 ),
             ));
         }
@@ -329,13 +338,19 @@ impl SurfaceOrders {
             .iter()
             .position(|&a| a >= alpha)
             .unwrap_or(ALPHA_NODES.len() - 1);
-        let (k0, w) = if ALPHA_NODES[k] == alpha || k == 0 {
-            (k, 0.0)
+        let k0 = if ALPHA_NODES[k] == alpha || k == 0 {
+            k
         } else {
-            (
-                k - 1,
-                (alpha - ALPHA_NODES[k - 1]) / (ALPHA_NODES[k] - ALPHA_NODES[k - 1]),
-            )
+            k - 1
+        };
+        let (a_lo, a_hi) = (
+            ALPHA_NODES[k0],
+            ALPHA_NODES[(k0 + 1).min(ALPHA_NODES.len() - 1)],
+        );
+        let w = if k0 == k {
+            0.0
+        } else {
+            similar::weight(a_lo, a_hi, alpha)
         };
         let eta_key = match eta {
             Eta::PerfectConductor => None,
@@ -362,7 +377,7 @@ impl SurfaceOrders {
         }
         let b = node_tables(key(k0 + 1), eta)?;
         let mix_t = |x: &Option<OrderTable>, y: &Option<OrderTable>| match (x, y) {
-            (Some(x), Some(y)) => Some(x.mix(y, w)),
+            (Some(x), Some(y)) => Some(similar::mix(x, y, a_lo, a_hi, alpha)),
             _ => None,
         };
         let (double, rest) = (mix_t(&a.double, &b.double), mix_t(&a.rest, &b.rest));
@@ -380,18 +395,13 @@ impl SurfaceOrders {
                     .chain(&b.white[p])
                     .fold(0.0f64, |m, &x| m.max(x));
                 let eps = MIX_FLOOR * peak;
-                a.white[p]
-                    .iter()
-                    .zip(&b.white[p])
-                    .map(|(&u, &v)| log_mix(u, v, w, eps))
-                    .collect::<Vec<f64>>()
+                similar::mix_nodes(&a.white[p], &b.white[p], a_lo, a_hi, alpha, |u, v, w| {
+                    log_mix(u, v, w, eps)
+                })
             })
         };
         let lin = |x: &[f64], y: &[f64]| -> Vec<f64> {
-            x.iter()
-                .zip(y)
-                .map(|(&u, &v)| (1.0 - w) * u + w * v)
-                .collect()
+            similar::mix_nodes(x, y, a_lo, a_hi, alpha, |u, v, w| (1.0 - w) * u + w * v)
         };
         let coherent = [0, 1].map(|p| match (&a.coherent[p], &b.coherent[p]) {
             (Some(x), Some(y)) => Some(x.mix(y, w)),

@@ -202,6 +202,41 @@ impl PyOrderTable {
         Ok(PyOrderTable(self.0.mix(&other.0, w)))
     }
 
+    /// The table at roughness ``alpha`` between this table, of roughness node ``a_lo``, and
+    /// ``other``, of node ``a_hi > a_lo``, as ``orders="surface"`` interpolates in alpha: M00
+    /// at the similar angles (``cot theta`` scaled by ``a / alpha``), the normalized
+    /// elements at the actual ones (``crate::brdf::orders::similar``).
+    fn mix_alpha(
+        &self,
+        other: &PyOrderTable,
+        a_lo: f64,
+        a_hi: f64,
+        alpha: f64,
+    ) -> PyResult<PyOrderTable> {
+        if !(a_lo > 0.0 && a_lo.is_finite()) {
+            return Err(Error::param("a_lo", a_lo, "must be positive and finite").into());
+        }
+        if !(a_hi > a_lo && a_hi.is_finite()) {
+            return Err(Error::param(
+                "a_hi",
+                a_hi,
+                format!("must be finite and above a_lo = {a_lo}"),
+            )
+            .into());
+        }
+        if !(alpha >= a_lo && alpha <= a_hi) {
+            return Err(Error::param(
+                "alpha",
+                alpha,
+                format!("must be in [a_lo, a_hi] = [{a_lo}, {a_hi}]"),
+            )
+            .into());
+        }
+        Ok(PyOrderTable(crate::brdf::orders::similar::mix(
+            &self.0, &other.0, a_lo, a_hi, alpha,
+        )))
+    }
+
     /// `(N_THETA, N_THETA, N_PHI, 4, 4)`: the nodes (`Sp` frames).
     #[getter]
     fn data<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray5<f64>> {

@@ -100,7 +100,7 @@ mod material_args {
 /// wavelength: the wavelength (m) ``eta`` is for; :func:`pprender.render` refuses a
 ///     sensor at another wavelength. pprender.materials.get sets it.
 /// orders: where orders >= 2 come from: "seed" (the double term above and the
-///     depolarizing multiple term) or "surface" (Beckmann only, alpha in [0.3, 1]: the
+///     depolarizing multiple term) or "surface" (Beckmann only, alpha in [0.05, 1]: the
 ///     paths of Gaussian-correlated surfaces, src/brdf/bank.rs; "double" is order 2,
 ///     "multiple" the orders beyond the enabled ones, polarized, plus a depolarizing
 ///     remainder that closes the energy balance). The single term's masking is then
@@ -111,11 +111,18 @@ mod material_args {
 ///     light and made orders 3+ too strong and depolarized. So the single term of such a
 ///     material differs from that of Material(terms=("single",)) by those few per cent.
 ///     Against the explicit surface, order 2
-///     is within 0.92-1.16 where the double term is 0.27-2.75 (CHANGELOG, issue 24). Its
-///     path banks (one per alpha node 0.3, 0.4, ..., 1.0 and ``bank_rays``) are traced
-///     on first use, once per machine (about a minute per node on 2 cores at the default
-///     rays, with a progress line on stderr unless PPRENDER_PROGRESS=0), and cached on
-///     disk (0.1-0.3 GB per node, 147 MB at alpha 0.5) in pprender.cache_dir():
+///     is within 0.92-1.16 where the double term is 0.27-2.75 (CHANGELOG, issue 24).
+///     Between alpha nodes the tables are interpolated along the small-slope similarity
+///     of the surface (cot(theta) / alpha), which follows the lobes of orders >= 2 as they
+///     move toward grazing with smaller alpha (docs/bank-alpha-interpolation.md states
+///     its error). Below 0.3 these orders carry light only toward grazing incidence
+///     (order 2: 0.6% at 70 deg and 5% at 80 deg for alpha 0.1), where the seed's
+///     multiple term instead returned 0.01-0.24 /sr toward the source. Its
+///     path banks (one per alpha node 0.05, 0.075, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, ...,
+///     1.0 and ``bank_rays``) are traced on first use, once per machine (about a minute
+///     per node on 2 cores at the default rays, less below 0.3, with a progress line on
+///     stderr unless PPRENDER_PROGRESS=0), and cached on disk (0.1-0.3 GB per node at
+///     0.3-1, 147 MB at alpha 0.5, less below) in pprender.cache_dir():
 ///     pprender.set_cache_dir(path), else the environment variable PPRENDER_CACHE_DIR
 ///     (empty or "off": memory only), else $XDG_CACHE_HOME/pprender, else
 ///     ~/.cache/pprender. Later processes read them (a new eta needs only its tables, a
@@ -139,9 +146,8 @@ mod material_args {
 ///     orders="surface" (and the double or multiple term) the banks' orders are mixed at
 ///     alpha itself as always (milliseconds once the banks' node tables are built) and the
 ///     nodes give the single term's calibration to the traced surface (its slow part):
-///     the nodes then divide the interval between the banks' alpha nodes (0.3, 0.4, ...,
-///     1.0) that holds alpha into steps of at most h in ln(alpha), never across a bank
-///     node. (A fit over alpha can instead interpolate its renders between node
+///     the nodes then divide the interval between the banks' alpha nodes (above) that
+///     holds alpha into steps of at most h in ln(alpha), never across a bank node. (A fit over alpha can instead interpolate its renders between node
 ///     materials, Fit's own alpha_step.)
 ///
 /// Invalid values (out of range, or of the wrong type, e.g. a number as a string) raise

@@ -65,8 +65,8 @@ fn reciprocal_between_nodes() {
     }
 }
 
-/// Between nodes the tables are the nodes' tables mixed at the fraction of the way in alpha
-/// ([`OrderTable::mix`]), and the albedos are the mixed tables' own.
+/// Between nodes the tables are the nodes' tables mixed at the similar angles
+/// ([`super::similar::mix`]), and the albedos are the mixed tables' own.
 #[test]
 fn tables_interpolate_in_alpha() {
     let eta = Eta::Complex(C64::new(1.5, 0.0));
@@ -84,8 +84,7 @@ fn tables_interpolate_in_alpha() {
             y.as_ref().unwrap(),
             z.as_ref().unwrap(),
         );
-        let want = x.mix(y, 0.25);
-        // alpha fractions in f64: 0.725 is 0.25000000000000044 of the way
+        let want = super::similar::mix(x, y, 0.7, 0.8, 0.725);
         for (p, q) in z.data.iter().zip(&want.data) {
             for r in 0..4 {
                 for c in 0..4 {
@@ -114,7 +113,7 @@ fn tables_interpolate_in_alpha() {
 /// distribution, too few rays.
 #[test]
 fn bad_input_names_the_parameter() {
-    let e = SurfaceOrders::new(0.1, Eta::PerfectConductor, true, true, RAYS).unwrap_err();
+    let e = SurfaceOrders::new(0.04, Eta::PerfectConductor, true, true, RAYS).unwrap_err();
     assert!(e.to_string().contains("alpha"), "{e}");
     let e = SurfaceOrders::new(0.5, Eta::PerfectConductor, true, true, 10).unwrap_err();
     assert!(e.to_string().contains("bank_rays"), "{e}");
