@@ -194,7 +194,8 @@ impl PyOrderTable {
     }
 
     /// The table at fraction `w` in `[0, 1]` of the way to `other` (two roughness nodes),
-    /// as `orders="surface"` interpolates in alpha (`crate::brdf::bank::OrderTable::mix`).
+    /// mixed node by node at the same angles (`crate::brdf::bank::OrderTable::mix`; what
+    /// `orders="surface"` did before `mix_alpha`, kept for comparison).
     fn mix(&self, other: &PyOrderTable, w: f64) -> PyResult<PyOrderTable> {
         if !(0.0..=1.0).contains(&w) {
             return Err(Error::param("w", w, "must be in [0, 1]").into());
