@@ -6,9 +6,10 @@
 //! with alpha: order 2 of a Beckmann surface with alpha 0.1 carries 0.6% of the light at 70
 //! deg and 5% at 80 deg, with alpha 0.05 none at 70 deg and 0.5% at 80 deg. Mixing two
 //! nodes' tables at the same `(theta_i, theta_o, phi)` ([`OrderTable::mix`]) then mixes
-//! two lobes at different places: measured against banks traced at the midpoints
-//! (0.075 between 0.05 and 0.1, 0.15, 0.25), its M00 missed by 20-65% (L1 over the exit
-//! hemisphere) where order 2 is strongest and by factors of 2-50 where it begins.
+//! two lobes at different places: against banks traced at the midpoints of the nodes'
+//! intervals below 0.3 (`docs/bank-alpha-interpolation.md`) its order-2 M00 missed by
+//! 12-29% (L1 over the exit hemisphere, aluminium) where order 2 is strong and by up to
+//! 120% where it begins.
 //!
 //! # The similarity
 //! With small slopes and grazing directions the geometry of the paths is unchanged when the
@@ -33,9 +34,13 @@
 //! -0.85 from the lower node). The mix takes them from [`OrderTable::mix`] at the actual
 //! angles (the mapped ones only where neither node has paths there).
 //!
-//! Against the midpoint banks (`scripts/bank_alpha_interpolation.py --low`): M00 within
-//! 3-10% L1 where order 2 is strongest, 20-40% where it begins (below 1e-3 of the light),
-//! the normalized elements within the banks' own noise.
+//! Against the midpoint banks (`scripts/bank_alpha_interpolation.py`,
+//! `docs/bank-alpha-interpolation.md`): order 2's M00 within 2.6-8% L1 where it is strong
+//! (albedo >= 1e-3) in the intervals up to 0.25 (0.25-0.3: 10%, the banks' own noise 11%),
+//! up to 42% where it begins (albedo 1e-4 to 1e-3); orders 3-8 within 3.4-20% where
+//! strong (the worst at 0.05-0.1, where they live in the last three incidence nodes); the
+//! normalized elements within the banks' own noise; above 0.3 at the noise, like the
+//! fixed-angle mix.
 //!
 //! Both nodes' values are exact on the nodes (`w = 0` gives the lower node's table, as
 //! [`OrderTable::mix`]), and the mix is reciprocal: the map is the same for `theta_i` and
