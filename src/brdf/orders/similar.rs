@@ -49,7 +49,7 @@
 //! `E T(i, o, j)^T E`), and `M00` and the mixed normalized matrices each keep it.
 
 use crate::brdf::bank::{log_mix, OrderTable, MIX_FLOOR, N_PHI, N_THETA, THETA_STEP};
-use crate::optics::mueller::Mat4;
+use crate::optics::mueller::{scale, Mat4};
 
 /// The polar angle whose cotangent is `r cot(theta)`.
 pub fn similar_theta(theta: f64, r: f64) -> f64 {
@@ -136,7 +136,7 @@ pub fn mix(lo: &OrderTable, hi: &OrderTable, a_lo: f64, a_hi: f64, alpha: f64) -
                 let (a, b) = (&p.data[n], &q.data[n]);
                 std::array::from_fn(|r| std::array::from_fn(|c| wa * a[r][c] + wb * b[r][c]))
             };
-            shape.map(|row| row.map(|x| m00 * x))
+            scale(&shape, m00)
         })
         .collect();
     OrderTable { data }
