@@ -103,7 +103,7 @@ about a minute per roughness node). It matters at grazing views: at 80 deg backs
 the default aluminium returns 0.23 /sr from its multiple term and ``orders="surface"``
 7.6e-5 /sr (gold 0.011 against 0; titanium 0.050 against 8.9e-6); an explicit aluminium
 surface of alpha 0.12 sent no ray of 1e6 back into a 0.1 rad cone at 70-80 deg
-(docs/double-bounce.md section 6).
+(docs/grazing-backscatter.md, docs/double-bounce.md section 6).
 """
 
 from __future__ import annotations
