@@ -124,3 +124,48 @@ def test_set_cache_dir_names_the_parameter(tmp_path: Path, bad: object) -> None:
     with pytest.raises(pprender.Error, match="cache_dir"):
         pprender.set_cache_dir(bad)  # type: ignore[arg-type]
     assert pprender.cache_dir() == old
+
+
+# ------------------------------------------------- PPRENDER_BANK_RAYS (Material's default)
+
+BANK_RAYS_SCRIPT = """
+import pprender
+m = pprender.Material("beckmann", alpha=0.3, eta=1.5, terms=("single",))
+print(m.bank_rays)
+print(pprender.Material("beckmann", alpha=0.3, eta=1.5, terms=("single",), bank_rays=5000).bank_rays)
+"""
+
+
+def _bank_rays_in_new_process(value: str | None) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    env.pop("PPRENDER_BANK_RAYS", None)
+    if value is not None:
+        env["PPRENDER_BANK_RAYS"] = value
+    return subprocess.run([sys.executable, "-c", BANK_RAYS_SCRIPT], env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("value, expected", [(None, 4_000_000), ("", 4_000_000), ("1000", 1000),
+                                             (" 250000 ", 250_000)])
+def test_bank_rays_default_from_the_environment(value: str | None, expected: int) -> None:
+    """Without ``bank_rays`` a Material takes PPRENDER_BANK_RAYS, else 4e6; a given value
+    wins over both."""
+    r = _bank_rays_in_new_process(value)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == [str(expected), "5000"]
+
+
+@pytest.mark.parametrize("value", ["999", str(2**32 + 1), "2e5", "-5", "many"])
+def test_bad_bank_rays_environment_is_refused(value: str) -> None:
+    """A PPRENDER_BANK_RAYS out of [1000, 2^32] or not an integer: pprender.Error naming
+    the variable and the range, never a silent default."""
+    r = _bank_rays_in_new_process(value)
+    assert r.returncode != 0
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("pprender.Error") or last.startswith("pprender._core.Error"), last
+    assert "PPRENDER_BANK_RAYS" in last and "[1000, 2^32]" in last, last
+
+
+def test_the_session_uses_small_banks() -> None:
+    """conftest.py sets 2e5 rays for the banks the session's materials build by default."""
+    assert pprender.Material("beckmann", alpha=0.3, eta=1.5, terms=("single",)).bank_rays == 200_000

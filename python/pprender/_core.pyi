@@ -43,7 +43,7 @@ class Material:
         wavelength: float = ...,
         correlation_length: float = ...,
         orders: str = "seed",
-        bank_rays: int = ...,
+        bank_rays: int | None = ...,
         alpha_step: float | None = None,
     ) -> Material: ...
     @property

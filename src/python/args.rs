@@ -58,6 +58,14 @@ pub fn count(name: &'static str, obj: &Bound<'_, PyAny>) -> PyResult<usize> {
         .map_err(|_| invalid(name, obj, "a non-negative integer"))
 }
 
+/// `None` or a non-negative integer (not bool, float or str).
+pub fn opt_count(name: &'static str, obj: &Bound<'_, PyAny>) -> PyResult<Option<usize>> {
+    if obj.is_none() {
+        return Ok(None);
+    }
+    count(name, obj).map(Some)
+}
+
 /// True or False.
 pub fn flag(name: &'static str, obj: &Bound<'_, PyAny>) -> PyResult<bool> {
     obj.extract::<bool>()

@@ -44,7 +44,7 @@ mod material_args {
     arg!(wavelength, real, f64);
     arg!(correlation_length, real, f64);
     arg!(orders, name, String);
-    arg!(bank_rays, count, usize);
+    arg!(bank_rays, opt_count, Option<usize>);
     arg!(alpha_step, opt_real, Option<f64>);
 }
 
@@ -55,7 +55,7 @@ mod material_args {
 ///          terms=("single", "multiple"), diffuse_albedo=0.0, name=None,
 ///          double_order=160, coherent_backscatter=True, double_masking="seed",
 ///          wavelength=1.064e-6, correlation_length=1e-5, orders="seed",
-///          bank_rays=4000000, alpha_step=None)
+///          bank_rays=None, alpha_step=None)
 ///
 /// distribution: "blinn_phong" (roughness exponent ``m`` in [0, 1e10]; m = 0 is
 ///     Lambertian-like, m -> inf a mirror), "beckmann" or "ggx" (``alpha`` in
@@ -134,7 +134,10 @@ mod material_args {
 ///     against. Their double term has the error measured for Beckmann (0.27-2.75x the
 ///     surface's order 2); in the paints it is 4% of the backscatter return at normal
 ///     incidence and 10% at 60 deg, the rest being the diffuse layer.
-/// bank_rays: primary rays per incidence node of each path bank (orders="surface").
+/// bank_rays: primary rays per incidence node of each path bank (orders="surface"), in
+///     [1000, 2^32]; None (default): the environment variable PPRENDER_BANK_RAYS if set
+///     (the test suite sets 200000: banks 20x cheaper, noisier), else 4000000
+///     (docs/bank-alpha-interpolation.md states the tables' noise at that count).
 /// alpha_step: None (default) builds the material's albedo and escape tables (those that
 ///     normalize the multiple, diffuse and double terms) at ``alpha`` itself. A step h in
 ///     (0, 1] interpolates them instead, Catmull-Rom in ln(alpha), from the materials at
@@ -179,12 +182,12 @@ impl PyMaterial {
         double_order=MaterialSpec::DOUBLE_ORDER, coherent_backscatter=true,
         double_masking=String::from("seed"),
         wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH,
-        orders=String::from("seed"), bank_rays=MaterialSpec::BANK_RAYS as usize, alpha_step=None),
+        orders=String::from("seed"), bank_rays=None, alpha_step=None),
         text_signature = "(distribution='blinn_phong', *, m=None, alpha=None, eta=(1.5+0j), \
 shadowing='aps', correlation=None, smith_g1='exact', masking='table', \
 terms=('single', 'multiple'), diffuse_albedo=0.0, name=None, double_order=160, \
 coherent_backscatter=True, double_masking='seed', wavelength=1.064e-06, \
-correlation_length=1e-05, orders='seed', bank_rays=4000000, alpha_step=None)")]
+correlation_length=1e-05, orders='seed', bank_rays=None, alpha_step=None)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -205,7 +208,7 @@ correlation_length=1e-05, orders='seed', bank_rays=4000000, alpha_step=None)")]
         #[pyo3(from_py_with = material_args::wavelength)] wavelength: f64,
         #[pyo3(from_py_with = material_args::correlation_length)] correlation_length: f64,
         #[pyo3(from_py_with = material_args::orders)] orders: String,
-        #[pyo3(from_py_with = material_args::bank_rays)] bank_rays: usize,
+        #[pyo3(from_py_with = material_args::bank_rays)] bank_rays: Option<usize>,
         #[pyo3(from_py_with = material_args::alpha_step)] alpha_step: Option<f64>,
     ) -> PyResult<Self> {
         let (distribution, shadowing, smith_g1, masking, double_masking) = (
@@ -241,7 +244,10 @@ correlation_length=1e-05, orders='seed', bank_rays=4000000, alpha_step=None)")]
             wavelength,
             correlation_length,
             orders: crate::brdf::spec::Orders::from_name(&orders)?,
-            bank_rays: bank_rays as u64,
+            bank_rays: match bank_rays {
+                Some(n) => n as u64,
+                None => default_bank_rays(|k| std::env::var_os(k))?,
+            },
             alpha_step,
         };
         let inner = py.detach(|| core_brdf::Material::new(spec))?;
@@ -393,13 +399,48 @@ correlation_length=1e-05, orders='seed', bank_rays=4000000, alpha_step=None)")]
             .as_ref()
             .map(|n| format!(", name={n:?}"))
             .unwrap_or_default();
+        // the orders >= 2 (and their banks' rays) when not the seed's: they change the
+        // numbers, so two materials that differ there must not print alike
+        let spec = &self.inner.spec;
+        let orders = match spec.orders {
+            crate::brdf::spec::Orders::Seed => String::new(),
+            o => {
+                let rays = if spec.bank_rays == MaterialSpec::BANK_RAYS {
+                    String::new()
+                } else {
+                    format!(", bank_rays={}", spec.bank_rays)
+                };
+                format!(", orders={:?}{rays}", o.name())
+            }
+        };
         format!(
-            "Material({:?}, {rough}, eta={eta}, shadowing={:?}, terms={:?}{})",
+            "Material({:?}, {rough}, eta={eta}, shadowing={:?}, terms={:?}{orders}{})",
             self.dist_name,
             self.shadowing(),
             self.terms(),
             name
         )
+    }
+}
+
+/// The environment variable that sets `Material(bank_rays=None)`.
+const BANK_RAYS_ENV: &str = "PPRENDER_BANK_RAYS";
+
+/// `bank_rays` when not given: `PPRENDER_BANK_RAYS` (an integer in [1000, 2^32]; anything
+/// else is refused, naming the variable) if set and not empty, else
+/// [`MaterialSpec::BANK_RAYS`]. `var` reads the environment (a parameter, for the tests).
+fn default_bank_rays(var: impl Fn(&str) -> Option<std::ffi::OsString>) -> crate::Result<u64> {
+    let Some(v) = var(BANK_RAYS_ENV).filter(|v| !v.is_empty()) else {
+        return Ok(MaterialSpec::BANK_RAYS);
+    };
+    let text = v.to_string_lossy();
+    match text.trim().parse::<u64>() {
+        Ok(n) if (1_000..=1u64 << 32).contains(&n) => Ok(n),
+        _ => Err(crate::Error::param(
+            BANK_RAYS_ENV,
+            format!("{text:?}"),
+            "an integer in [1000, 2^32] (the default bank_rays of Material)",
+        )),
     }
 }
 
