@@ -17,6 +17,12 @@
   must not fill it. Under pytest-xdist (``make test`` runs a worker per core) the workers share
   the controller's directory, so a bank one worker traced is read by the others (writes
   are atomic renames, ``src/brdf/bank/cache.rs``).
+* The path banks' default rays are 2e5 (``PPRENDER_BANK_RAYS``, set here likewise), not the
+  library's 4e6: ``pprender.materials`` gives its Beckmann materials ``orders="surface"``,
+  so most test files build banks, and at 4e6 rays each node costs 30 s to minutes on 2
+  cores. Tests that measure the banks' accuracy pass ``bank_rays`` themselves; the full
+  count's cost and noise are measured by benchmarks/bench_surface_orders.py and
+  scripts/bank_alpha_interpolation.py.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ else:
     os.environ["PPRENDER_TEST_CACHE_DIR"] = _CACHE_DIR
     atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
 os.environ["PPRENDER_CACHE_DIR"] = _CACHE_DIR
+os.environ["PPRENDER_BANK_RAYS"] = "200000"
 
 import glob  # noqa: E402
 import importlib.metadata  # noqa: E402

@@ -297,6 +297,53 @@ def test_model_bad_arguments(kwargs, match):
         fit.ForwardModel(model_mesh(), metal(), inst, [-0.1, 0.0, 0.1], **kwargs)
 
 
+def test_alpha_bounds_keep_surface_orders_buildable():
+    """A fitted material with orders="surface" (pprender.materials' metals by default) exists
+    only for alpha in [0.05, 1]: the default bounds are narrowed to it, given bounds outside
+    are refused, naming them (a -inf wall inside the prior would be silent), and with
+    alpha_step the interpolation near the ends uses only nodes inside (the quadratic through
+    the three there) and refuses alpha beyond them."""
+    inst = ins.Instrument(pulse_energy=1e-3, target_range=5e5)
+    surf = pprender.Material("beckmann", alpha=0.3, eta=1.38 + 10.2j, orders="surface")
+    # a face 1.3 deg off the line of sight: at alpha 0.05 its glint is the return
+    fixed = {"rx": 0.02, "ry": 0.01, "rz": 0.0}
+    edges = [-0.1, 0.0, 0.1]
+    m = fit.ForwardModel(model_mesh(), surf, inst, edges, ("alpha",), lidar=LIDAR, fixed=fixed)
+    assert m.alpha_step == 0.05
+    np.testing.assert_array_equal(m.bounds[0], [0.05, 1.0])
+    # between 0.05 and the first node above it (exp(-59 h) = 0.0523) and one node further:
+    # only nodes >= 0.05 are built, and the result is the quadratic through the first three
+    calls = []
+    real = m._rendered
+    m._rendered = lambda full: calls.append(full[:, 3].copy()) or real(full)  # type: ignore[method-assign]
+    got = m.expected([[0.0505], [0.054]])
+    nodes = np.concatenate(calls)
+    assert nodes.min() >= 0.05 and np.allclose(np.unique(nodes), np.exp(np.array([-59, -58, -57]) * 0.05))
+    # below the materials' range: refused by the bounds, and no value (not an
+    # extrapolation) from the interpolation itself
+    with pytest.raises(pprender.Error, match="bounds"):
+        m.expected([[0.0499]])
+    full = m._base[None, :].copy()
+    full[:, 3] = 0.0499
+    out, ok, _ = m._expected_full(full)
+    assert not ok[0] and np.all(np.isnan(out[0]))
+    # against exact renders (alpha_step=None): measured 2.0e-5 of the peak bin at 0.0505
+    # (the quadratic extrapolated 0.07 of a node below its first node), 4.8e-7 at 0.054,
+    # where Catmull-Rom inside the range gives 3.0e-6 at 0.06; the bound is 10x the worst
+    exact = fit.ForwardModel(model_mesh(), surf, inst, edges, ("alpha",), lidar=LIDAR, fixed=fixed,
+                             alpha_step=None)
+    want = exact.expected([[0.0505], [0.054]])
+    assert np.all(want.sum(axis=(1, 2)) > 0)
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-4 * want.max())
+    for bad in ((0.01, 0.5), (0.1, 1.2)):
+        with pytest.raises(pprender.Error, match=r"bounds for 'alpha'.*orders=\"surface\""):
+            fit.ForwardModel(model_mesh(), surf, inst, edges, ("alpha",), lidar=LIDAR, fixed=fixed,
+                             bounds={"alpha": bad})
+    # a material with the seed's orders keeps the default bounds
+    seed = fit.ForwardModel(model_mesh(), metal(), inst, edges, ("alpha",), lidar=LIDAR, fixed=fixed)
+    np.testing.assert_array_equal(seed.bounds[0], fit.DEFAULT_BOUNDS["alpha"])
+
+
 # ---------------------------------------------------------------------- Fisher information
 
 

@@ -57,7 +57,8 @@ def test_orders_two_and_beyond_match_the_surface_between_nodes(runs) -> None:
 def test_no_grazing_backscatter_from_orders_two_and_beyond(runs) -> None:
     """Regression: at grazing incidence a smooth metal's orders >= 2 leave forward; the
     surface sends nothing back (no ray of 1e6 in the 0.1 rad backscatter cone at 70-80 deg).
-    The seed's depolarizing multiple term, which pprender.materials' metals carry, returned
+    The seed's depolarizing multiple term, which pprender.materials' metals carried by default
+    before they took the surface orders, returned
     0.012, 0.073 and 0.24 /sr there. Bound: 3 rays (95% for zero counts) over the cone's
     projected solid angle, 2.5e-4 to 5.5e-4 /sr; the surface orders give below 1.1e-4."""
     both = _material(("double", "multiple"))

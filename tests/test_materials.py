@@ -327,6 +327,50 @@ def test_material_kwargs_overrides():
     assert kw["eta"] == 1.7 and kw["name"] == "kapton"
 
 
+# Which orders >= 2 each material gets (module docstring): "surface" for a Beckmann
+# material with alpha in SURFACE_ALPHA, "seed" otherwise, decided from the parameters.
+SURFACE_BY_DEFAULT = ("aluminium", "gold", "silver", "copper", "titanium", "kapton")
+
+
+@pytest.mark.parametrize("name", materials.NAMES)
+def test_default_orders(name):
+    kw = materials.material_kwargs(name)
+    assert kw["orders"] == ("surface" if name in SURFACE_BY_DEFAULT else "seed")
+
+
+def test_default_orders_follow_the_parameters():
+    lo, hi = materials.SURFACE_ALPHA
+    kw = materials.material_kwargs
+    assert kw("aluminium", alpha=lo)["orders"] == "surface"
+    assert kw("aluminium", alpha=hi)["orders"] == "surface"
+    assert kw("aluminium", alpha=lo * 0.999)["orders"] == "seed"
+    assert kw("aluminium", alpha=hi * 1.001)["orders"] == "seed"
+    # fused silica's own 0.02 is below the banks; at 0.1 it gets them
+    assert kw("fused_silica", alpha=0.1)["orders"] == "surface"
+    # another distribution keeps the seed's; a GGX paint made Beckmann gets the banks
+    assert kw("gold", distribution="ggx")["orders"] == "seed"
+    assert kw("gold", distribution="blinn_phong", m=100.0)["orders"] == "seed"
+    assert kw("white_paint", distribution="beckmann")["orders"] == "surface"
+    # a Beckmann m maps to alpha = sqrt(2 / (m + 2)): m = 20 -> 0.30, m = 1e4 -> 0.014
+    assert kw("gold", m=20.0)["orders"] == "surface"
+    assert kw("gold", m=1e4)["orders"] == "seed"
+    # the caller's orders win, and a bad value is left for Material to refuse
+    assert kw("gold", orders="seed")["orders"] == "seed"
+    assert kw("gold", alpha="rough")["orders"] == "seed"
+
+
+def test_surface_alpha_is_the_banks_range():
+    """SURFACE_ALPHA is a copy of the banks' node range: Material must accept its lower end
+    and refuse just outside both ends (else get() would build materials that fail, or
+    give the seed's orders where the banks exist)."""
+    lo, hi = materials.SURFACE_ALPHA
+    for alpha in (lo * (1 - 1e-9), hi * (1 + 1e-9)):
+        with pytest.raises(pprender.Error, match=r"alpha.*\[0\.05, 1\]"):
+            pprender.Material("beckmann", alpha=alpha, eta=1.5, orders="surface")
+    m = materials.get("gold", alpha=lo)
+    assert m.orders == "surface" and m.alpha == lo
+
+
 def test_material_kwargs_does_not_share_state():
     a = materials.material_kwargs("gold")
     a["alpha"] = 99.0
@@ -348,6 +392,8 @@ def test_get_builds_a_material(name, wl):
     assert mat.alpha == pytest.approx(kw["alpha"])
     assert tuple(mat.terms) == kw["terms"]
     assert ("diffuse" in tuple(mat.terms)) == (name in ("white_paint", "black_paint"))
+    assert mat.orders == kw["orders"]
+    assert ('orders="surface"' in repr(mat)) == (name in SURFACE_BY_DEFAULT)
 
 
 def test_get_alias_and_overrides():

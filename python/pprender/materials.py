@@ -95,15 +95,26 @@ Default roughness (:func:`get`, overridable; engineering choices, Beckmann
 - white_paint: ggx 0.50 -- matte ceramic paint; GGX's long tail fits rough-surface glints.
 - black_paint: ggx 0.50 -- flat (matte) polyurethane paint, same reasoning.
 
-Orders >= 2 are the seed paper's by default (``terms`` ``("single", "multiple")``: a fully
-depolarizing multiple term). For the Beckmann materials from alpha 0.05 (all but
-fused_silica), ``get(name, orders="surface")`` takes them from paths traced on explicit
-surfaces instead (``pprender.Material``'s ``orders``; path banks traced once per machine,
-about a minute per roughness node). It matters at grazing views: at 80 deg backscatter
-the default aluminium returns 0.23 /sr from its multiple term and ``orders="surface"``
-7.6e-5 /sr (gold 0.011 against 0; titanium 0.050 against 8.9e-6); an explicit aluminium
+Orders >= 2: every Beckmann material with alpha in :data:`SURFACE_ALPHA` (0.05-1: the
+defaults of aluminium, gold, silver, copper, titanium and kapton, and any of them at another
+alpha there) takes them from paths traced on explicit Gaussian surfaces
+(``pprender.Material``'s ``orders="surface"``: order 2 and orders 3-8 polarized, with the
+surface's slope correlation; path banks traced once per machine and cached, 30-52 s per
+roughness node up to 0.3 on 2 cores, longer above). The others keep the seed paper's
+(``terms`` ``("single", "multiple")``: a fully depolarizing multiple term): fused_silica
+(alpha 0.02, below the banks: there orders >= 2 exist only within a few degrees of grazing),
+the GGX paints (the banks' surfaces are Gaussian, so Beckmann; the paints' return is mostly
+their diffuse layer), and any material given ``alpha`` outside 0.05-1 or another
+distribution. ``get(name, orders="seed")`` selects the seed's terms for any of them.
+
+What the choice changes is measured in docs/grazing-backscatter.md: at 80 deg backscatter
+the seed's aluminium returns 0.23 /sr from its multiple term and the surface orders
+7.6e-5 /sr (gold 0.011 against 0; titanium 0.050 against 8.9e-6), and an explicit aluminium
 surface of alpha 0.12 sent no ray of 1e6 back into a 0.1 rad cone at 70-80 deg
-(docs/grazing-backscatter.md, docs/double-bounce.md section 6).
+(docs/double-bounce.md section 6). Scored against explicit surfaces at alpha 0.3-1
+(docs/surface-orders-reference.md), the surface orders' order 2 is within 10% in 141 of 167
+rows (the seed's 58), their orders 3+ within 25% in 86 of 110 (the seed's 4), and the whole
+return's depolarization index at backscatter within 0.03 in 64 of 66 (the seed's 42).
 """
 
 from __future__ import annotations
@@ -122,11 +133,17 @@ __all__ = [
     "diffuse_albedo",
     "material_kwargs",
     "get",
+    "SURFACE_ALPHA",
 ]
 
 #: The tabulated wavelengths in metres; a request must lie within ``_TOLERANCE`` of one.
 WAVELENGTHS: Tuple[float, ...] = (532e-9, 1064e-9)
 _TOLERANCE = 1e-9  # 1 nm
+
+#: The Beckmann roughness over which :func:`get` takes orders >= 2 from the path banks
+#: (``orders="surface"``: the banks' alpha nodes span it; tests/test_materials.py checks
+#: that ``pprender.Material`` accepts its lower end and refuses just outside both).
+SURFACE_ALPHA: Tuple[float, float] = (0.05, 1.0)
 
 _SINGLE_MULTIPLE = ("single", "multiple")
 _WITH_DIFFUSE = ("single", "multiple", "diffuse")
@@ -310,7 +327,10 @@ def material_kwargs(name: str, wavelength: float = 1064e-9, **kwargs: Any) -> Di
     material's default roughness, then applies ``kwargs`` (which win; ``name`` itself cannot
     be overridden here). A caller's ``m`` replaces the default ``alpha`` and vice versa.
     Unless the caller gives ``terms``, they are ``("single", "multiple", "diffuse")`` when the
-    resulting ``diffuse_albedo`` is positive and ``("single", "multiple")`` otherwise.
+    resulting ``diffuse_albedo`` is positive and ``("single", "multiple")`` otherwise. Unless
+    the caller gives ``orders``, it is ``"surface"`` when the resulting material is Beckmann
+    with ``alpha`` (or the ``alpha`` its ``m`` maps to) in :data:`SURFACE_ALPHA`, and
+    ``"seed"`` otherwise (module docstring): decided once per material, from its parameters.
 
     Parameters
     ----------
@@ -353,7 +373,26 @@ def material_kwargs(name: str, wavelength: float = 1064e-9, **kwargs: Any) -> Di
         albedo = params.get("diffuse_albedo")
         positive = isinstance(albedo, (int, float)) and albedo > 0.0
         params["terms"] = _WITH_DIFFUSE if positive else _SINGLE_MULTIPLE
+    if "orders" not in kwargs:
+        params["orders"] = _default_orders(params)
     return params
+
+
+def _default_orders(params: Mapping[str, Any]) -> str:
+    """``"surface"`` for a Beckmann material with alpha in :data:`SURFACE_ALPHA`, else
+    ``"seed"`` (module docstring). Values that are not numbers are left for
+    ``pprender.Material`` to refuse, naming them."""
+    if params.get("distribution", "blinn_phong") != "beckmann":
+        return "seed"
+    alpha, m = params.get("alpha"), params.get("m")
+    number = (int, float)
+    if isinstance(m, number) and not isinstance(m, bool) and alpha is None and m > -2.0:
+        alpha = math.sqrt(2.0 / (m + 2.0))  # pprender's Blinn-Phong -> Beckmann map
+    if isinstance(alpha, number) and not isinstance(alpha, bool):
+        lo, hi = SURFACE_ALPHA
+        if lo <= alpha <= hi:
+            return "surface"
+    return "seed"
 
 
 def get(name: str, wavelength: float = 1064e-9, **kwargs: Any) -> Any:

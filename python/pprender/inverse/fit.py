@@ -89,6 +89,7 @@ from scipy.spatial.transform import Rotation
 from .. import lidar as _lidar
 from .. import _core
 from .._core import Error, Material
+from ..materials import SURFACE_ALPHA
 from . import speckle as _speckle
 from .atmosphere import pulse_groups
 from .detector import Detector, coates_probabilities, record, record_log_likelihood
@@ -380,7 +381,13 @@ class ForwardModel:
     fixed : mapping, optional
         Values of parameters that are not free.
     bounds : mapping, optional
-        ``name -> (low, high)`` for free parameters (default :data:`DEFAULT_BOUNDS`).
+        ``name -> (low, high)`` for free parameters (default :data:`DEFAULT_BOUNDS`). With
+        ``alpha`` free and a fitted material with ``orders="surface"`` (the default of
+        ``pprender.materials``' Beckmann metals), ``alpha`` must stay where such a material
+        can be built: within [0.05, 1]. The default bounds are narrowed to that range;
+        given bounds outside it are refused. (With ``alpha_step``, within one node of
+        either end the interpolation is the quadratic through the three nodes there, so
+        no node outside is needed.)
     reference_attitude : (3, 3), (4,) or scipy Rotation, optional
         ``R_ref`` (default identity): one rotation matrix, one ``(w, x, y, z)`` quaternion
         (scalar first) or a single :class:`scipy.spatial.transform.Rotation` (a stack of
@@ -574,6 +581,9 @@ class ForwardModel:
             cheap = {"single", "diffuse"}
             alpha_step = 0.05 if any(set(self.materials[i].terms) - cheap for i in self.fitted) else None
         self.alpha_step: float | None = alpha_step if "alpha" in free else None
+        self._alpha_nodes: tuple[tuple[int, int], tuple[float, float]] | None = None
+        if "alpha" in free:
+            self._bound_alpha(free.index("alpha"), "alpha" in bounds)
         if isinstance(cache_size, (bool, np.bool_)) or not isinstance(cache_size, (int, np.integer)) or cache_size < 1:
             raise Error(f"invalid cache_size = {cache_size!r}: an integer >= 1")
         self._cache_size = int(cache_size)
@@ -593,6 +603,32 @@ class ForwardModel:
         # count's dof at theta (one dof or one area) or takes them from the data (per bin)
         self._background = instrument.background_counts(self.bin_edges)
         self._speckle_at_theta = instrument.speckle is not None and not instrument.speckle.per_bin
+
+    def _bound_alpha(self, i: int, given: bool) -> None:
+        """Keep a free ``alpha`` (row ``i`` of the bounds) where the fitted materials can
+        be built (``bounds`` in the class docstring): narrow the default bounds, refuse
+        ``given`` ones outside; with ``alpha_step``, note the nodes inside that range
+        (``_alpha_nodes``: the interpolation's edge stencils)."""
+        surface = [self.materials[j] for j in self.fitted
+                   if self.materials[j].orders == "surface"]
+        if not surface:
+            return
+        lo, hi = SURFACE_ALPHA
+        h = self.alpha_step
+        if h is not None:
+            u_lo, u_hi = math.log(lo) / h, math.log(hi) / h
+            self._alpha_nodes = ((math.ceil(u_lo - 1e-9), math.floor(u_hi + 1e-9)), (u_lo, u_hi))
+        if given:
+            if self.lower[i] < lo or self.upper[i] > hi:
+                raise Error(
+                    f"invalid bounds for 'alpha': ({self.lower[i]:g}, {self.upper[i]:g}) leaves "
+                    f"[{lo:g}, {hi:g}], where the fitted materials with orders=\"surface\" "
+                    f"{[m.name for m in surface]} exist; narrow the bounds or fit materials with "
+                    f"orders=\"seed\""
+                )
+            return
+        self.lower[i] = max(self.lower[i], lo)
+        self.upper[i] = min(self.upper[i], hi)
 
     # -------------------------------------------------------------- basics
 
@@ -699,18 +735,32 @@ class ForwardModel:
         t = u - j
         w = np.stack([(-t**3 + 2 * t**2 - t) / 2, (3 * t**3 - 5 * t**2 + 2) / 2,
                       (-3 * t**3 + 4 * t**2 + t) / 2, (t**3 - t**2) / 2], axis=1)  # (n, 4)
+        base = j - 1  # the first of the four nodes
+        inside = np.isfinite(u)
+        if self._alpha_nodes is not None:
+            # the fitted materials exist only between nodes j_lo and j_hi (_bound_alpha):
+            # within one node of either end, the quadratic through the three nodes there
+            # (what Catmull-Rom gives with the missing node extrapolated quadratically, so
+            # still C1 at the next node), and nothing beyond the materials' own range
+            (j_lo, j_hi), (u_lo, u_hi) = self._alpha_nodes
+            inside &= (u >= u_lo - 1e-9) & (u <= u_hi + 1e-9)
+            for edge, b0 in ((u < j_lo + 1, j_lo), (u > j_hi - 1, j_hi - 2)):
+                sq = u[edge] - b0
+                w[edge] = np.stack([(sq - 1) * (sq - 2) / 2, -sq * (sq - 2), sq * (sq - 1) / 2,
+                                    np.zeros_like(sq)], axis=1)
+                base[edge] = b0
         rows, weights, src = [], [], []
         for m in range(4):
             node = full.copy()
-            node[:, ia] = np.exp((j + m - 1) * self.alpha_step)
-            keep = np.isfinite(u) & (w[:, m] != 0.0)
+            node[:, ia] = np.exp((base + m) * self.alpha_step)
+            keep = inside & (w[:, m] != 0.0)
             rows.append(node[keep])
             weights.append(w[keep, m])
             src.append(np.flatnonzero(keep))
         lam_all, ok_all, var_all = self._rendered(np.concatenate(rows))
         out = np.zeros((n, len(self.bin_edges) - 1, len(self.channel_names)))
         var = None if var_all is None else np.zeros_like(out)
-        ok = np.isfinite(u)
+        ok = inside.copy()
         at = 0
         for m in range(4):
             k = len(src[m])
