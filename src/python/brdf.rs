@@ -100,7 +100,9 @@ mod material_args {
 /// wavelength: the wavelength (m) ``eta`` is for; :func:`pprender.render` refuses a
 ///     sensor at another wavelength. pprender.materials.get sets it.
 /// orders: where orders >= 2 come from: "seed" (the double term above and the
-///     depolarizing multiple term) or "surface" (Beckmann only, alpha in [0.05, 1]: the
+///     depolarizing multiple term; the default of Material, which builds what its caller
+///     spells out; pprender.materials.get gives its Beckmann materials in [0.05, 1]
+///     "surface") or "surface" (Beckmann only, alpha in [0.05, 1]: the
 ///     paths of Gaussian-correlated surfaces, src/brdf/bank.rs; "double" is order 2,
 ///     "multiple" the orders beyond the enabled ones, polarized, plus a depolarizing
 ///     remainder that closes the energy balance). The single term's masking is then

@@ -268,6 +268,33 @@ fn single_term_is_calibrated_to_the_surfaces_order_one() {
     }
 }
 
+/// The single term's calibration is cached per process on what it depends on
+/// ([`crate::brdf::calibration::calibrate_masking`]): a material of another index at the
+/// same roughness and bank takes it from the cache, and it is bit for bit the one computed
+/// afresh for that material (so `eta` does not enter it, as the cache assumes).
+#[test]
+fn cached_calibration_equals_a_fresh_one_for_another_eta() {
+    use crate::brdf::calibration::calibrate_uncached;
+    use crate::brdf::material::ALBEDO_ORDER;
+    let gold = Eta::Complex(C64::new(0.2585, 6.9654));
+    let _first = material(0.3, Eta::Complex(C64::new(1.3763, 10.2449)), true);
+    let t0 = std::time::Instant::now();
+    let cached = material(0.3, gold, true);
+    let dt = t0.elapsed().as_secs_f64();
+    let so = cached.surface_orders.as_ref().unwrap();
+    let target: Vec<f64> = (0..N_THETA).map(|k| so.order1_target(k)).collect();
+    let fine = |theta: f64| so.calibration_target(theta);
+    let mut fresh = crate::brdf::surface::Surface::new(cached.spec.clone());
+    let t1 = std::time::Instant::now();
+    calibrate_uncached(&mut fresh, THETA_STEP, &target, Some(&fine), ALBEDO_ORDER);
+    eprintln!(
+        "material from the cache {dt:.3} s; its calibration afresh {:.3} s",
+        t1.elapsed().as_secs_f64()
+    );
+    assert!(fresh.calibration.is_some());
+    assert_eq!(fresh.calibration, cached.calibration);
+}
+
 /// Orders 3+ of the material (the banks' orders 3-8 plus the depolarizing remainder)
 /// against the explicit surface (other surfaces and rays): aluminium at alpha 0.8, 30 deg
 /// incidence, exit along the normal, where before the single term was calibrated the
