@@ -386,8 +386,13 @@ def _default_orders(params: Mapping[str, Any]) -> str:
         return "seed"
     alpha, m = params.get("alpha"), params.get("m")
     number = (int, float)
-    if isinstance(m, number) and not isinstance(m, bool) and alpha is None and m > -2.0:
-        alpha = math.sqrt(2.0 / (m + 2.0))  # pprender's Blinn-Phong -> Beckmann map
+    if isinstance(m, number) and not isinstance(m, bool) and alpha is None:
+        from pprender import Material  # lazy: Material is optional at import time
+
+        try:  # the core's map of m to alpha (a single-term material builds in microseconds)
+            alpha = Material("beckmann", m=m, terms=("single",)).alpha
+        except Error:
+            return "seed"
     if isinstance(alpha, number) and not isinstance(alpha, bool):
         lo, hi = SURFACE_ALPHA
         if lo <= alpha <= hi:

@@ -4,11 +4,12 @@
 //! [`Surface`] and the albedo quadrature it calls.
 
 use super::albedo::single_albedo;
+use super::recent::Recent;
 use super::surface::Surface;
 use super::{MaterialSpec, Terms};
 use crate::microfacet::masking::{self, ZTable, TABLE_NODES};
 use crate::optics::fresnel::Eta;
-use std::sync::{Mutex, OnceLock};
+use std::sync::Mutex;
 
 /// The cheaper rule and the tolerance [`calibrate_masking`] reaches with it
 /// before it goes on with the given rule.
@@ -95,28 +96,14 @@ pub fn calibrate_masking(
         return calibrate_uncached(surface, step, target, fine, order);
     }
     let key = CalibrationKey::new(&surface.spec, step, target, fine, order);
-    let cache = calibrations();
-    let hit = {
-        let mut kept = cache.lock().unwrap_or_else(|e| e.into_inner());
-        kept.iter().position(|(k, _)| *k == key).map(|i| {
-            let entry = kept.remove(i);
-            kept.push(entry.clone()); // most recently used last
-            entry.1
-        })
-    };
-    if let Some((table, result)) = hit {
+    let kept = || CALIBRATIONS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((table, result)) = kept().get(&key) {
         surface.calibration = Some(table);
         return result;
     }
     let result = calibrate_uncached(surface, step, target, fine, order);
     if let Some(table) = surface.calibration.clone() {
-        let mut kept = cache.lock().unwrap_or_else(|e| e.into_inner());
-        if !kept.iter().any(|(k, _)| *k == key) {
-            if kept.len() >= CALIBRATIONS_KEPT {
-                kept.remove(0);
-            }
-            kept.push((key, (table, result)));
-        }
+        kept().insert(key, (table, result));
     }
     result
 }
@@ -160,23 +147,24 @@ impl CalibrationKey {
         spec.correlation_length = 0.0;
         spec.bank_rays = 0;
         spec.alpha_step = None;
-        let bits = |v: &mut dyn Iterator<Item = f64>| v.map(f64::to_bits).collect::<Vec<u64>>();
         CalibrationKey {
             spec,
             step: step.to_bits(),
             order,
-            target: bits(&mut target.iter().copied()),
-            fine: fine.map(|f| bits(&mut fine_thetas(step).into_iter().map(f))),
+            target: target.iter().map(|x| x.to_bits()).collect(),
+            fine: fine.map(|f| {
+                fine_thetas(step)
+                    .into_iter()
+                    .map(|t| f(t).to_bits())
+                    .collect()
+            }),
         }
     }
 }
 
-type Kept = Mutex<Vec<(CalibrationKey, (ZTable, Calibration))>>;
-
-fn calibrations() -> &'static Kept {
-    static C: OnceLock<Kept> = OnceLock::new();
-    C.get_or_init(|| Mutex::new(Vec::new()))
-}
+/// The calibrations kept ([`calibrate_masking`]).
+static CALIBRATIONS: Mutex<Recent<CalibrationKey, (ZTable, Calibration)>> =
+    Mutex::new(Recent::new(CALIBRATIONS_KEPT));
 
 /// The fine stage's nodes (deg steps in [`FINE_PER_STEP`], up to [`FINE_LAST_DEG`]).
 fn fine_thetas(step: f64) -> Vec<f64> {

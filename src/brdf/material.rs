@@ -845,8 +845,8 @@ fn interpolate_calibration(
 
 /// Materials at alpha nodes, kept for the process: the [`NODE_CACHE_LEN`] most recently
 /// used, keyed by their whole spec.
-static NODE_CACHE: std::sync::Mutex<Vec<(String, Arc<Material>)>> =
-    std::sync::Mutex::new(Vec::new());
+static NODE_CACHE: std::sync::Mutex<super::recent::Recent<String, Arc<Material>>> =
+    std::sync::Mutex::new(super::recent::Recent::new(NODE_CACHE_LEN));
 /// Node materials kept (4 per region of alpha in use; each holds a few tables of 257 to
 /// 513 values, and the banks' mixed orders when `orders = Surface`).
 pub const NODE_CACHE_LEN: usize = 64;
@@ -863,23 +863,12 @@ fn node_material(spec: &MaterialSpec, alpha: f64) -> Result<Arc<Material>> {
         Distribution::BlinnPhong { .. } => unreachable!("alpha_step is refused for Blinn-Phong"),
     };
     let key = format!("{node:?}");
-    {
-        let mut cache = NODE_CACHE.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(i) = cache.iter().position(|(k, _)| *k == key) {
-            let hit = cache.remove(i);
-            let m = hit.1.clone();
-            cache.push(hit);
-            return Ok(m);
-        }
+    let cache = || NODE_CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(m) = cache().get(&key) {
+        return Ok(m);
     }
     let m = Arc::new(Material::new(node)?);
-    let mut cache = NODE_CACHE.lock().unwrap_or_else(|e| e.into_inner());
-    if !cache.iter().any(|(k, _)| *k == key) {
-        if cache.len() >= NODE_CACHE_LEN {
-            cache.remove(0);
-        }
-        cache.push((key, m.clone()));
-    }
+    cache().insert(key, m.clone());
     Ok(m)
 }
 

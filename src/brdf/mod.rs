@@ -24,6 +24,7 @@ pub mod calibration;
 pub mod double;
 pub mod material;
 pub mod orders;
+mod recent;
 pub mod single;
 pub mod spec;
 pub mod surface;

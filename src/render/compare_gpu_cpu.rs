@@ -69,37 +69,27 @@ fn lambertian_sphere_on_the_device_matches_twin_and_analytic() {
 /// own M00, with an absolute floor for the faintest pixels (grazing limb pixels, where
 /// f32 rounding of a tiny cos(theta_i) is relatively large but carries no signal).
 fn worst(a: &[f32], b: &[f32], floor: f32) -> (f64, usize) {
-    let mut w = 0.0f64;
-    let mut k = 0;
-    for (p, (x, y)) in a.chunks(16).zip(b.chunks(16)).enumerate() {
-        {
-            let e = x
-                .iter()
-                .zip(y)
-                .map(|(u, v)| (u - v).abs())
-                .fold(0.0f32, f32::max) as f64
-                / y[0].max(floor) as f64;
-            if e > w {
-                w = e;
-                k = p;
-            }
-        }
-    }
-    (w, k)
+    worst_over(a, b, |m00| Some(m00.max(floor)))
 }
 
 /// [`worst`] over the pixels whose `b` M00 exceeds `floor` only, relative to that M00.
 fn worst_lit(a: &[f32], b: &[f32], floor: f32) -> (f64, usize) {
+    worst_over(a, b, |m00| (m00 > floor).then_some(m00))
+}
+
+/// The largest `max_k |a_k - b_k| / d` over pixels and the pixel, `d = scale(b's M00)`;
+/// pixels where `scale` gives `None` are left out.
+fn worst_over(a: &[f32], b: &[f32], scale: impl Fn(f32) -> Option<f32>) -> (f64, usize) {
     let mut w = 0.0f64;
     let mut k = 0;
     for (p, (x, y)) in a.chunks(16).zip(b.chunks(16)).enumerate() {
-        if y[0] > floor {
+        if let Some(d) = scale(y[0]) {
             let e = x
                 .iter()
                 .zip(y)
                 .map(|(u, v)| (u - v).abs())
                 .fold(0.0f32, f32::max) as f64
-                / y[0] as f64;
+                / d as f64;
             if e > w {
                 w = e;
                 k = p;
@@ -406,13 +396,7 @@ fn surface_orders_kernel_matches_twin_and_core_per_pixel() {
                     .fold(0.0f32, f32::max) as f64;
                 let (e_lit, _) = worst_lit(ti, ci, floor);
                 // relative to the image's peak, every pixel, every element
-                let of_peak = |a: &[f32], b: &[f32]| {
-                    a.iter()
-                        .zip(b)
-                        .map(|(u, v)| (u - v).abs())
-                        .fold(0.0f32, f32::max) as f64
-                        / peak as f64
-                };
+                let of_peak = |a: &[f32], b: &[f32]| worst_over(a, b, |_| Some(peak)).0;
                 let (gt_peak, tc_peak) = (of_peak(gi, ti), of_peak(ti, ci));
                 let (e_bright, _) = worst_lit(ti, ci, 0.1 * peak);
                 eprintln!(
