@@ -432,7 +432,7 @@ class ConeRule:
         return out
 
 
-_MATS: Dict[Tuple[float, complex, str, Optional[int]], Optional[Dict[str, pprender.Material]]] = {}
+_MATS: Dict[Tuple[float, complex, str, Optional[int], str], Optional[Dict[str, pprender.Material]]] = {}
 # The terms add up: 3+ is dm - d, and order 1 is sdm - dm. With orders="surface" it must
 # be that difference: the single term's masking is calibrated to the bank's order 1 with
 # the multiple term's energy balance (Surface::calibrate_masking), which a single-term
@@ -443,13 +443,20 @@ TERM_SETS = {"s": ("single",), "d": ("double",), "dm": ("double", "multiple"),
              "sdm": ("single", "double", "multiple")}
 
 
-def model_materials(alpha: float, eta: complex, mode: str,
-                    bank_rays: Optional[int]) -> Optional[Dict[str, pprender.Material]]:
-    key = (alpha, eta, mode, bank_rays)
+def model_materials(alpha: float, eta: complex, mode: str, bank_rays: Optional[int],
+                    shape: str = "gaussian") -> Optional[Dict[str, pprender.Material]]:
+    """The model's materials per term set; with ``orders="surface"`` on path banks of the
+    autocorrelation ``shape`` (the reference cell's: each shape's banks are scored against
+    surfaces of that shape); the seed's terms have no shape."""
+    if mode != "surface":
+        shape = "gaussian"
+    key = (alpha, eta, mode, bank_rays, shape)
     if key not in _MATS:
         kw: Dict[str, Any] = dict(alpha=alpha, eta=eta, coherent_backscatter=False, orders=mode)
         if bank_rays is not None:
             kw["bank_rays"] = bank_rays
+        if mode == "surface":
+            kw["autocorrelation"] = shape
         try:
             _MATS[key] = {n: pprender.Material("beckmann", terms=terms, **kw) for n, terms in TERM_SETS.items()}
         except pprender.Error:  # orders="surface" outside alpha [0.05, 1]
@@ -471,7 +478,7 @@ def model_values(cell: Cell, mode: str, s: Settings) -> Optional[Dict[str, np.nd
 
 
 def _model_values(cell: Cell, mode: str, s: Settings) -> Optional[Dict[str, np.ndarray]]:
-    mats = model_materials(cell.alpha, cell.eta, mode, s.bank_rays)
+    mats = model_materials(cell.alpha, cell.eta, mode, s.bank_rays, cell.correlation)
     if mats is None:
         return None
     wi, wos = cell.wi, list(cell.wos())
@@ -792,7 +799,8 @@ def page(res: Dict[str, Any], argv: Sequence[str], cells_requested: Sequence[Cel
       "terms (single,), the same sum), order 2 = (double,), 3+ = (double, multiple) - "
       "(double,), whole = (single, "
       f'double, multiple). `orders="surface"` exists for alpha in [{SURFACE_RANGE[0]:g}, {SURFACE_RANGE[1]:g}] only '
-      '(n/a elsewhere)'
+      '(n/a elsewhere), on path banks of the cell\'s own autocorrelation shape (`autocorrelation="gaussian"` or '
+      '`"matern"`: each shape\'s banks are scored against surfaces of that shape, traced with other seeds)'
       + (f"; path banks of {s.bank_rays:.0e} rays per incidence node" if s.bank_rays else
          "; path banks at their default size") + ".")
     a(f"- Scoring (issue 24, Targets): a row is scored only where the reference's se(M00) <= {s.se_target:.0%} of "
@@ -837,8 +845,9 @@ def page(res: Dict[str, Any], argv: Sequence[str], cells_requested: Sequence[Cel
     a("")
     a("Same alpha, material, incidence and exit, rows where both references meet the se target: M00 "
       "ratio Matern / Gaussian per order, median [min, max] (rows); for 3+ also the DI difference Matern - "
-      "Gaussian. The model is the same for both shapes, so this is how much of a miss can come from the shape "
-      "of the autocorrelation alone.")
+      "Gaussian: how much the shape of the autocorrelation alone moves orders >= 2 at the same alpha, which a "
+      "model on Gaussian banks would miss on a Matern surface (`orders=\"surface\"` takes "
+      "`autocorrelation=\"matern\"` for those).")
     a("")
     w.extend(shape_table(rows, s))
     a("")

@@ -83,6 +83,33 @@ def test_material_with_surface_orders() -> None:
         pprender.Material("beckmann", alpha=0.04, orders="surface", bank_rays=20_000)
 
 
+def test_autocorrelation_of_the_banks() -> None:
+    """``autocorrelation``: Gaussian by default, Matern on request (its own banks: another
+    BRDF at the same alpha, and the white furnace still closes), shown by ``repr``; refused
+    with the seed's orders and for unknown names or types, naming the parameter. (The
+    Matern banks' physics: tests/test_surface_orders_reference.py and
+    src/brdf/orders/tests.rs.)"""
+    kw = dict(alpha=0.8, terms=("single", "double", "multiple"), orders="surface", bank_rays=20_000)
+    g = pprender.Material("beckmann", eta=complex("inf"), **kw)
+    m = pprender.Material("beckmann", eta=complex("inf"), autocorrelation="matern", **kw)
+    assert g.autocorrelation == "gaussian" and "autocorrelation" not in repr(g)
+    assert m.autocorrelation == "matern" and 'autocorrelation="matern"' in repr(m)
+    wi = np.array([[0.0, 0.0, 1.0]])
+    wo = np.array([[0.5, 0.0, 0.866025]]) / np.linalg.norm([0.5, 0.0, 0.866025])
+    assert pprender.brdf(m, wi, wo)[0, 0, 0] != pprender.brdf(g, wi, wo)[0, 0, 0]
+    for deg in (0.0, 60.0, 85.0):
+        w = np.array([[np.sin(np.radians(deg)), 0.0, np.cos(np.radians(deg))]])
+        assert abs(pprender.albedo(m, w)[0] - 1.0) < 1e-4, deg
+    with pytest.raises(pprender.Error, match="autocorrelation.*orders"):
+        pprender.Material("beckmann", alpha=0.8, autocorrelation="matern")
+    with pytest.raises(pprender.Error, match="autocorrelation.*gaussian"):
+        pprender.Material("beckmann", autocorrelation="exponential", **kw)
+    with pytest.raises(pprender.Error, match="autocorrelation"):
+        pprender.Material("beckmann", autocorrelation=2, **kw)
+    with pytest.raises(pprender.Error, match="autocorrelation"):
+        _core.PathBank(0.5, 1000, autocorrelation="matérn")
+
+
 
 def test_surface_orders_renderer_table_follows_the_material_at_grazing() -> None:
     """Regression (model version 3): the depolarizing remainder of an ``orders="surface"``

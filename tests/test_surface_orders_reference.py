@@ -51,6 +51,32 @@ def test_matern_surfaces_have_the_requested_gaussian_slopes_and_their_own_correl
     assert mat[8] - gau[8] > 0.05 and mat[12] - gau[12] > 0.07, (mat[:13], gau[:13])
 
 
+def test_matern_banks_match_independently_synthesized_matern_surfaces() -> None:
+    """The library's Matern banks (Rust synthesis, ``autocorrelation="matern"``) against
+    explicit surfaces synthesized here with numpy's FFT (``sor.matern_heights``), traced by
+    the reference: the flux fractions leaving after 2 and after 3-8 reflections (F = 1,
+    normal incidence, alpha 0.8). Tolerances are 3 standard deviations of the difference,
+    measured over 6 bank seeds and 32 reference surfaces (bank sd 0.0031 and 0.0009, the
+    reference's se 0.0015 and 0.0004): 0.010 for order 2 (3%), 0.003 for 3+ (13%). The
+    Gaussian surfaces' 3+ is 0.016 against the Matern's 0.023 (measured): the check tells
+    the shapes apart, which the last assertion confirms on the reference itself."""
+    from pprender import _core
+
+    wi, wo = np.array([0.0, 0, 1]), np.array([[0.0, 0, 1]])
+
+    def ref(heights_of) -> np.ndarray:
+        runs = [reference.microsurface(wi, wo, eta=complex("inf"), rays=25_000, batches=2, max_order=8,
+                                       **heights_of(s)) for s in range(32)]
+        return np.mean([r["albedo"] for r in runs], axis=0)  # orders 1, 2, 3+
+
+    mat = ref(lambda s: {"heights": sor.matern_heights(0.8, 128, 1000 + s)})
+    gau = ref(lambda s: {"alpha": 0.8, "grid": 128, "seed": 1000 + s})
+    bank = _core.PathBank(0.8, 40_000, surfaces=8, grid=128, seed=2, autocorrelation="matern").albedo[0]
+    assert abs(bank[1] - mat[1]) < 0.010, (bank[1], mat[1])
+    assert abs(bank[2:8].sum() - mat[2]) < 0.003, (bank[2:8].sum(), mat[2])
+    assert mat[2] > 1.25 * gau[2], (mat, gau)
+
+
 def test_runs_resumes_from_the_cache_and_writes_the_page(tmp_path: Path) -> None:
     cache, out = tmp_path / "cache", tmp_path / "page.md"
     argv = ["--quick", "--alphas", "0.8", "--thetas", "0", "--materials", "aluminium", "--correlations",

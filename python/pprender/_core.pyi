@@ -44,6 +44,7 @@ class Material:
         correlation_length: float = ...,
         orders: str = "seed",
         bank_rays: int | None = ...,
+        autocorrelation: str = "gaussian",
         alpha_step: float | None = None,
     ) -> Material: ...
     @property
@@ -81,6 +82,8 @@ class Material:
     @property
     def orders(self) -> str: ...
     @property
+    def autocorrelation(self) -> str: ...
+    @property
     def bank_rays(self) -> int: ...
     @property
     def alpha_step(self) -> float | None: ...
@@ -91,7 +94,8 @@ class Material:
 
 @final
 class PathBank:
-    """Order >= 2 paths traced on Gaussian surfaces (src/brdf/bank.rs; issue 24)."""
+    """Order >= 2 paths traced on Gaussian random surfaces with a Gaussian or Matern
+    height autocorrelation (src/brdf/bank.rs; issue 24)."""
 
     def __new__(
         cls,
@@ -101,6 +105,7 @@ class PathBank:
         grid: int = 256,
         correlation_length: float = 8.0,
         seed: int = 1,
+        autocorrelation: str = "gaussian",
     ) -> PathBank: ...
     @property
     def albedo(self) -> npt.NDArray[np.float64]: ...

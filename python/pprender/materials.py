@@ -100,7 +100,8 @@ defaults of aluminium, gold, silver, copper, titanium and kapton, and any of the
 alpha there) takes them from paths traced on explicit Gaussian surfaces
 (``pprender.Material``'s ``orders="surface"``: order 2 and orders 3-8 polarized, with the
 surface's slope correlation; path banks traced once per machine and cached, 30-52 s per
-roughness node up to 0.3 on 2 cores, longer above). The others keep the seed paper's
+roughness node up to 0.3 on 2 cores, longer above; ``get(name, autocorrelation="matern")``
+takes banks of Matern-correlated surfaces instead, with the same slopes). The others keep the seed paper's
 (``terms`` ``("single", "multiple")``: a fully depolarizing multiple term): fused_silica
 (alpha 0.02, below the banks: there orders >= 2 exist only within a few degrees of grazing),
 the GGX paints (the banks' surfaces are Gaussian, so Beckmann; the paints' return is mostly

@@ -1,5 +1,5 @@
-//! Orders 2 and higher of a Gaussian-correlated Beckmann surface from the surface's own
-//! paths (issue 24).
+//! Orders 2 and higher of a Beckmann surface (Gaussian slopes, a Gaussian or Matern height
+//! autocorrelation) from the surface's own paths (issue 24).
 //!
 //! # Why
 //! The double term ([`super::double`]) draws the second facet independently of the first.
@@ -13,9 +13,9 @@
 //! applied per path.
 //!
 //! # The bank ([`PathBank`])
-//! Gaussian random surfaces with a Gaussian autocorrelation
-//! ([`crate::reference::microsurface::gaussian_height_field`]: triangulated, exactly
-//! Beckmann slopes), lit by a plane wave from `wi = (sin theta_i, 0, cos theta_i)` at the
+//! Gaussian random surfaces with the autocorrelation [`BankSpec::autocorrelation`]
+//! ([`crate::reference::microsurface::height_field`]: triangulated, exactly Beckmann
+//! slopes; Gaussian or Matern, with the same slope statistics), lit by a plane wave from `wi = (sin theta_i, 0, cos theta_i)` at the
 //! incidence nodes `theta_i = k THETA_STEP`, `k < N_THETA` (0 to 87.5 deg). Primary rays start
 //! uniformly over the tile's horizontal area (each carries `1 / R` of the flux on the tile,
 //! `R` the node's primary rays) and are followed geometrically (mirror reflection off the
@@ -65,7 +65,7 @@ use crate::optics::frames::{
 };
 use crate::optics::fresnel::{fresnel_amplitudes, Eta, C64};
 use crate::optics::mueller::{jones_to_mueller, Jones, Mat4};
-use crate::reference::microsurface::{check_gaussian, gaussian_height_field};
+use crate::reference::microsurface::{check_gaussian, height_field, Autocorrelation};
 use crate::reference::rng::Rng;
 use crate::reference::trace::{trace_segment, Segment};
 use crate::{Error, Result};
@@ -103,8 +103,11 @@ pub struct BankSpec {
     pub alpha: f64,
     /// Tile size in grid cells.
     pub grid: usize,
-    /// Height correlation length in grid cells (`C(r) ~ exp(-r^2 / l^2)`).
+    /// Height correlation length `l` in grid cells (`C(r) ~ exp(-r^2 / l^2)` for the
+    /// Gaussian shape; the Matern's length with the same slope statistics).
     pub correlation_length: f64,
+    /// The shape of the height autocorrelation.
+    pub autocorrelation: Autocorrelation,
     /// Primary rays per incidence node (over all surfaces).
     pub rays: u64,
     /// Independent random surfaces (the rays are shared among them).
@@ -310,7 +313,8 @@ impl PathBank {
         let mut counts = vec![[0u64; MAX_ORDER + 1]; N_THETA];
         let mut lost = 0u64;
         for s in 0..ns {
-            let (field, _) = gaussian_height_field(
+            let (field, _) = height_field(
+                spec.autocorrelation,
                 spec.alpha,
                 spec.grid,
                 spec.correlation_length,

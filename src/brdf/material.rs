@@ -3,6 +3,7 @@
 
 use super::bank::{N_THETA, THETA_STEP};
 use super::orders::{Part, SurfaceOrders, ALPHA_NODES as BANK_ALPHA_NODES};
+use super::spec::{Autocorrelation, Orders};
 pub use super::spec::{MaterialSpec, Term, Terms};
 pub use super::surface::Surface;
 use crate::microfacet::distribution::{ALPHA_MAX, ALPHA_MIN};
@@ -277,12 +278,22 @@ impl Material {
                 ));
             }
         }
+        // (like `orders` itself, the shape has nothing to do with the single term alone)
+        if spec.autocorrelation != Autocorrelation::Gaussian && spec.orders != Orders::Surface {
+            return Err(Error::param(
+                "autocorrelation",
+                format!("{:?}", spec.autocorrelation.name()),
+                "the autocorrelation shape is that of the path banks' surfaces: it needs \
+                 orders=\"surface\" (the seed's terms have no shape); else leave it \
+                 \"gaussian\"",
+            ));
+        }
         let surface_orders = if spec.uses_banks() {
             let Distribution::Beckmann { alpha } = spec.distribution else {
                 return Err(Error::param(
                     "orders",
                     "\"surface\"",
-                    "the path banks are of Gaussian-correlated Beckmann surfaces: use \
+                    "the path banks are of Gaussian random (so Beckmann) surfaces: use \
                      distribution=\"beckmann\" (or orders=\"seed\")",
                 ));
             };
@@ -292,6 +303,7 @@ impl Material {
                 spec.terms.double,
                 spec.terms.multiple,
                 spec.bank_rays,
+                spec.autocorrelation,
             )?))
         } else {
             None

@@ -1,8 +1,9 @@
 //! A material's orders >= 2 from path banks ([`super::bank`]) at roughness nodes,
 //! interpolated in alpha: the data behind [`super::spec::Orders::Surface`].
 //!
-//! For each alpha node (`ALPHA_NODES`) a bank is traced once per process (64 Gaussian
-//! surfaces, `MaterialSpec::bank_rays` primary rays per incidence node; thinned to
+//! For each alpha node (`ALPHA_NODES`) and autocorrelation shape
+//! ([`crate::reference::microsurface::Autocorrelation`]) a bank is traced once per process
+//! (64 surfaces, `MaterialSpec::bank_rays` primary rays per incidence node; thinned to
 //! `PATH_CAP` paths per node and order) and each material's tables are built from it: the
 //! order-2 table when "double" is on, and the table of the orders beyond the enabled ones
 //! (3..=8 with "double", 2..=8 without) when "multiple" is on; plus, per incidence node,
@@ -37,6 +38,7 @@ use super::bank::{
 use crate::optics::frames::{beam_bases, change_bases, Frame, V3};
 use crate::optics::fresnel::Eta;
 use crate::optics::mueller::Mat4;
+use crate::reference::microsurface::Autocorrelation;
 use crate::{Error, Result};
 use std::collections::HashMap;
 use std::ffi::OsString;
@@ -61,6 +63,7 @@ const SURFACES: u32 = 64;
 struct NodeKey {
     node: usize,
     rays: u64,
+    shape: Autocorrelation,
     /// `(re, im)` bits, or `None` for a perfect conductor.
     eta: Option<(u64, u64)>,
     double: bool,
@@ -84,8 +87,8 @@ struct NodeTables {
     coherent: [Option<CoherentTable>; 2],
 }
 
-/// The banks kept, by `(node, rays)`, oldest first.
-type Banks = Mutex<Vec<((usize, u64), Arc<PathBank>)>>;
+/// The banks kept, by `(node, rays, shape)`, oldest first.
+type Banks = Mutex<Vec<((usize, u64, Autocorrelation), Arc<PathBank>)>>;
 
 fn banks() -> &'static Banks {
     static B: OnceLock<Banks> = OnceLock::new();
@@ -163,9 +166,11 @@ fn check_cache_dir(d: &Path) -> Result<PathBuf> {
     Ok(abs)
 }
 
-/// The bank of alpha node `node` at `rays` rays per incidence node.
-fn bank_spec(node: usize, rays: u64) -> BankSpec {
+/// The bank of alpha node `node` at `rays` rays per incidence node on surfaces of
+/// autocorrelation `shape`.
+fn bank_spec(node: usize, rays: u64, shape: Autocorrelation) -> BankSpec {
     BankSpec {
+        autocorrelation: shape,
         alpha: ALPHA_NODES[node],
         grid: 256,
         correlation_length: 8.0,
@@ -199,8 +204,8 @@ fn load_or_trace(dir: Option<&Path>, spec: &BankSpec) -> Result<PathBank> {
     })
 }
 
-fn bank(node: usize, rays: u64) -> Result<Arc<PathBank>> {
-    let key = (node, rays);
+fn bank(node: usize, rays: u64, shape: Autocorrelation) -> Result<Arc<PathBank>> {
+    let key = (node, rays, shape);
     // held while tracing: concurrent builders of the same bank wait for one trace
     let mut kept = banks().lock().unwrap_or_else(|e| e.into_inner());
     if let Some((_, b)) = kept.iter().find(|(k, _)| *k == key) {
@@ -208,7 +213,7 @@ fn bank(node: usize, rays: u64) -> Result<Arc<PathBank>> {
     }
     let b = Arc::new(load_or_trace(
         cache_dir().as_deref(),
-        &bank_spec(node, rays),
+        &bank_spec(node, rays, shape),
     )?);
     if kept.len() >= BANKS_KEPT {
         kept.remove(0);
@@ -221,7 +226,7 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
     if let Some(t) = tables().lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
         return Ok(t.clone());
     }
-    let b = bank(key.node, key.rays)?;
+    let b = bank(key.node, key.rays, key.shape)?;
     let first_rest = if key.double { 3 } else { 2 };
     let build = |eta: Eta, on: bool, orders: std::ops::RangeInclusive<usize>| {
         on.then(|| OrderTable::build(&b, eta, orders))
@@ -230,7 +235,7 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
     let rest = build(eta, key.multiple, first_rest..=MAX_ORDER);
     let fresnel = [albedos(&double), albedos(&rest)];
     let coherent_of = |orders: std::ops::RangeInclusive<usize>| {
-        let g = gamma(&b, key.node, key.rays, orders.clone());
+        let g = gamma(&b, key, orders.clone());
         CoherentTable::build_with(&b, eta, orders, Some(&g))
     };
     let coherent = [
@@ -262,15 +267,10 @@ fn node_tables(key: NodeKey, eta: Eta) -> Result<Arc<NodeTables>> {
 
 /// The coherent-backscatter `gamma` table of a bank's orders (the same for every material:
 /// [`CoherentTable`]), computed once per process.
-fn gamma(
-    b: &PathBank,
-    node: usize,
-    rays: u64,
-    orders: std::ops::RangeInclusive<usize>,
-) -> Arc<Vec<f64>> {
-    type Gammas = Mutex<HashMap<(usize, u64, usize), Arc<Vec<f64>>>>;
+fn gamma(b: &PathBank, node: NodeKey, orders: std::ops::RangeInclusive<usize>) -> Arc<Vec<f64>> {
+    type Gammas = Mutex<HashMap<(usize, u64, Autocorrelation, usize), Arc<Vec<f64>>>>;
     static G: OnceLock<Gammas> = OnceLock::new();
-    let key = (node, rays, *orders.start());
+    let key = (node.node, node.rays, node.shape, *orders.start());
     let cache = G.get_or_init(|| Mutex::new(HashMap::new()));
     if let Some(g) = cache.lock().unwrap_or_else(|e| e.into_inner()).get(&key) {
         return g.clone();
@@ -316,9 +316,16 @@ pub enum Part {
 }
 
 impl SurfaceOrders {
-    /// The tables of a Beckmann material of roughness `alpha` and index `eta` (module
-    /// docs). `alpha` must lie within the nodes.
-    pub fn new(alpha: f64, eta: Eta, double: bool, multiple: bool, rays: u64) -> Result<Self> {
+    /// The tables of a Beckmann material of roughness `alpha` and index `eta` on surfaces
+    /// of autocorrelation `shape` (module docs). `alpha` must lie within the nodes.
+    pub fn new(
+        alpha: f64,
+        eta: Eta,
+        double: bool,
+        multiple: bool,
+        rays: u64,
+        shape: Autocorrelation,
+    ) -> Result<Self> {
         let (lo, hi) = (ALPHA_NODES[0], ALPHA_NODES[ALPHA_NODES.len() - 1]);
         if !(alpha >= lo && alpha <= hi) {
             return Err(Error::param(
@@ -359,6 +366,7 @@ impl SurfaceOrders {
         let key = |node| NodeKey {
             node,
             rays,
+            shape,
             eta: eta_key,
             double,
             multiple,

@@ -5,6 +5,7 @@
 
 use crate::microfacet::{Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
 use crate::optics::fresnel::Eta;
+pub use crate::reference::microsurface::Autocorrelation;
 use crate::{Error, Result};
 
 /// One term of the BRDF. The BRDF is the sum of the enabled ones ([`Terms`]) in the order of
@@ -115,7 +116,8 @@ pub enum Orders {
     /// The seed's formulation: the double term's quadrature with uncorrelated second facets
     /// ([`super::double`]) and the depolarizing multiple term standing for orders 3+.
     Seed,
-    /// The paths of a Gaussian-correlated Beckmann surface ([`super::bank`]): order 2 and,
+    /// The paths of a Beckmann surface with a Gaussian (or Matern,
+    /// [`MaterialSpec::autocorrelation`]) height autocorrelation ([`super::bank`]): order 2 and,
     /// under "multiple", the orders beyond the enabled ones, polarized, plus a depolarizing
     /// remainder that closes the energy balance.
     Surface,
@@ -137,7 +139,7 @@ impl Orders {
                 "orders",
                 format!("{other:?}"),
                 "expected \"seed\" (the double term and the depolarizing multiple term) or \
-                 \"surface\" (the path bank of a Gaussian-correlated Beckmann surface)",
+                 \"surface\" (the path banks of Gaussian random Beckmann surfaces)",
             )),
         }
     }
@@ -173,6 +175,11 @@ pub struct MaterialSpec {
     pub orders: Orders,
     /// With [`Orders::Surface`]: primary rays per incidence node of each path bank.
     pub bank_rays: u64,
+    /// With [`Orders::Surface`]: the shape of the banked surfaces' height autocorrelation
+    /// (Gaussian, the default, or Matern; the same slope statistics, so the same single
+    /// term, but other orders >= 2: `docs/surface-orders-reference.md` measures by how
+    /// much). Anything but Gaussian needs [`Orders::Surface`].
+    pub autocorrelation: Autocorrelation,
     /// `Some(h)`: the material's albedo and escape tables are the Catmull-Rom interpolation
     /// in `ln alpha` of those of the materials at the four nodes `alpha = exp(j h)` about
     /// it, built once per process and kept ([`Material::new`](super::material::Material::new)
@@ -208,6 +215,7 @@ impl MaterialSpec {
             correlation_length: Self::CORRELATION_LENGTH,
             orders: Orders::Seed,
             bank_rays: Self::BANK_RAYS,
+            autocorrelation: Autocorrelation::Gaussian,
             alpha_step: None,
         }
     }

@@ -5,6 +5,7 @@
 use crate::brdf::bank::{BankSpec, OrderTable, PathBank, MAX_ORDER, N_PHI, N_THETA};
 use crate::optics::frames::{Frame, V3};
 use crate::optics::fresnel::{Eta, C64};
+use crate::reference::microsurface::Autocorrelation;
 use crate::Error;
 use numpy::ndarray::{Array2, Array3, Array5};
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyArray5, PyReadonlyArray2};
@@ -28,15 +29,18 @@ fn parse_eta(eta: C64) -> crate::Result<Eta> {
     Ok(Eta::Complex(eta))
 }
 
-/// `PathBank(alpha, rays, surfaces=64, grid=256, correlation_length=8.0, seed=1)`: the
-/// order-2 paths of Gaussian-correlated Beckmann surfaces (`crate::brdf::bank`).
+/// `PathBank(alpha, rays, surfaces=64, grid=256, correlation_length=8.0, seed=1,
+/// autocorrelation="gaussian")`: the order >= 2 paths of Beckmann surfaces with a Gaussian
+/// or Matern height autocorrelation (`crate::brdf::bank`).
 #[pyclass(module = "pprender._core", name = "PathBank", frozen)]
 pub struct PyPathBank(PathBank);
 
 #[pymethods]
 impl PyPathBank {
     #[new]
-    #[pyo3(signature = (alpha, rays, surfaces=64, grid=256, correlation_length=8.0, seed=1))]
+    #[pyo3(signature = (alpha, rays, surfaces=64, grid=256, correlation_length=8.0, seed=1,
+        autocorrelation="gaussian"))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         alpha: f64,
@@ -45,8 +49,10 @@ impl PyPathBank {
         grid: usize,
         correlation_length: f64,
         seed: u64,
+        autocorrelation: &str,
     ) -> PyResult<Self> {
         let spec = BankSpec {
+            autocorrelation: Autocorrelation::from_name(autocorrelation)?,
             alpha,
             grid,
             correlation_length,

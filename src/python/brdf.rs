@@ -1,5 +1,6 @@
 //! Bindings for `crate::brdf`: the `Material` class and batched evaluation.
 
+use crate::brdf::spec::Autocorrelation;
 use crate::brdf::{self as core_brdf, MaterialSpec, Terms};
 use crate::microfacet::{Correlation, Distribution, MaskingEval, Shadowing, SmithG1};
 use crate::optics::frames::{Frame, V3};
@@ -45,6 +46,7 @@ mod material_args {
     arg!(correlation_length, real, f64);
     arg!(orders, name, String);
     arg!(bank_rays, opt_count, Option<usize>);
+    arg!(autocorrelation, name, String);
     arg!(alpha_step, opt_real, Option<f64>);
 }
 
@@ -55,7 +57,7 @@ mod material_args {
 ///          terms=("single", "multiple"), diffuse_albedo=0.0, name=None,
 ///          double_order=160, coherent_backscatter=True, double_masking="seed",
 ///          wavelength=1.064e-6, correlation_length=1e-5, orders="seed",
-///          bank_rays=None, alpha_step=None)
+///          bank_rays=None, autocorrelation="gaussian", alpha_step=None)
 ///
 /// distribution: "blinn_phong" (roughness exponent ``m`` in [0, 1e10]; m = 0 is
 ///     Lambertian-like, m -> inf a mirror), "beckmann" or "ggx" (``alpha`` in
@@ -103,7 +105,8 @@ mod material_args {
 ///     depolarizing multiple term; the default of Material, which builds what its caller
 ///     spells out; pprender.materials.get gives its Beckmann materials in [0.05, 1]
 ///     "surface") or "surface" (Beckmann only, alpha in [0.05, 1]: the
-///     paths of Gaussian-correlated surfaces, src/brdf/bank.rs; "double" is order 2,
+///     paths of Gaussian-correlated surfaces, or Matern ones (``autocorrelation``),
+///     src/brdf/bank.rs; "double" is order 2,
 ///     "multiple" the orders beyond the enabled ones, polarized, plus a depolarizing
 ///     remainder that closes the energy balance). The single term's masking is then
 ///     calibrated to the traced surface's order 1, G s(theta_i) s(theta_o) with s(theta)
@@ -140,6 +143,18 @@ mod material_args {
 ///     [1000, 2^32]; None (default): the environment variable PPRENDER_BANK_RAYS if set
 ///     (the test suite sets 200000: banks 20x cheaper, noisier), else 4000000
 ///     (docs/bank-alpha-interpolation.md states the tables' noise at that count).
+/// autocorrelation: the shape of the height autocorrelation of the banks' surfaces
+///     (orders="surface"; refused with orders="seed"): "gaussian"
+///     (default, C(r) = exp(-r^2 / l^2)) or "matern" (Matern of smoothness 5/2,
+///     (1 + x + x^2/3) exp(-x) with x = sqrt(6) r / l: the same slope statistics, so the
+///     same alpha, but slopes that stay correlated over longer distances; the single
+///     term's calibration follows its banks' order 1, within a few per cent of the
+///     Gaussian's). The shape changes orders >= 2 at the same alpha: on explicit surfaces
+///     at alpha 0.5-1 the Matern's order 2 is 0.57-1.05x the Gaussian's and its orders 3+
+///     0.9-2.0x
+///     (docs/surface-orders-reference.md, which scores each shape's banks against
+///     surfaces of that shape). ``correlation_length`` is l for both. Each shape has its
+///     own banks (traced and cached as above).
 /// alpha_step: None (default) builds the material's albedo and escape tables (those that
 ///     normalize the multiple, diffuse and double terms) at ``alpha`` itself. A step h in
 ///     (0, 1] interpolates them instead, Catmull-Rom in ln(alpha), from the materials at
@@ -184,12 +199,14 @@ impl PyMaterial {
         double_order=MaterialSpec::DOUBLE_ORDER, coherent_backscatter=true,
         double_masking=String::from("seed"),
         wavelength=MaterialSpec::WAVELENGTH, correlation_length=MaterialSpec::CORRELATION_LENGTH,
-        orders=String::from("seed"), bank_rays=None, alpha_step=None),
+        orders=String::from("seed"), bank_rays=None, autocorrelation=String::from("gaussian"),
+        alpha_step=None),
         text_signature = "(distribution='blinn_phong', *, m=None, alpha=None, eta=(1.5+0j), \
 shadowing='aps', correlation=None, smith_g1='exact', masking='table', \
 terms=('single', 'multiple'), diffuse_albedo=0.0, name=None, double_order=160, \
 coherent_backscatter=True, double_masking='seed', wavelength=1.064e-06, \
-correlation_length=1e-05, orders='seed', bank_rays=None, alpha_step=None)")]
+correlation_length=1e-05, orders='seed', bank_rays=None, autocorrelation='gaussian', \
+alpha_step=None)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -211,6 +228,7 @@ correlation_length=1e-05, orders='seed', bank_rays=None, alpha_step=None)")]
         #[pyo3(from_py_with = material_args::correlation_length)] correlation_length: f64,
         #[pyo3(from_py_with = material_args::orders)] orders: String,
         #[pyo3(from_py_with = material_args::bank_rays)] bank_rays: Option<usize>,
+        #[pyo3(from_py_with = material_args::autocorrelation)] autocorrelation: String,
         #[pyo3(from_py_with = material_args::alpha_step)] alpha_step: Option<f64>,
     ) -> PyResult<Self> {
         let (distribution, shadowing, smith_g1, masking, double_masking) = (
@@ -250,6 +268,7 @@ correlation_length=1e-05, orders='seed', bank_rays=None, alpha_step=None)")]
                 Some(n) => n as u64,
                 None => default_bank_rays(|k| std::env::var_os(k))?,
             },
+            autocorrelation: Autocorrelation::from_name(&autocorrelation)?,
             alpha_step,
         };
         let inner = py.detach(|| core_brdf::Material::new(spec))?;
@@ -351,6 +370,12 @@ correlation_length=1e-05, orders='seed', bank_rays=None, alpha_step=None)")]
     fn orders(&self) -> &'static str {
         self.inner.spec.orders.name()
     }
+
+    /// The shape of the path banks' height autocorrelation ("gaussian" or "matern").
+    #[getter]
+    fn autocorrelation(&self) -> &'static str {
+        self.inner.spec.autocorrelation.name()
+    }
     #[getter]
     fn bank_rays(&self) -> u64 {
         self.inner.spec.bank_rays
@@ -412,7 +437,11 @@ correlation_length=1e-05, orders='seed', bank_rays=None, alpha_step=None)")]
                 } else {
                     format!(", bank_rays={}", spec.bank_rays)
                 };
-                format!(", orders={:?}{rays}", o.name())
+                let shape = match spec.autocorrelation {
+                    Autocorrelation::Gaussian => String::new(),
+                    a => format!(", autocorrelation={:?}", a.name()),
+                };
+                format!(", orders={:?}{rays}{shape}", o.name())
             }
         };
         format!(

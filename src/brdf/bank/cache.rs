@@ -11,7 +11,7 @@
 //! Layout, little-endian: the magic `PPRBANK\n`, the format ([`FORMAT`], `u32`), the code
 //! version (`u32` length, UTF-8), `MAX_ORDER`, `N_THETA` (`u32`), the cap (`u64`), the spec
 //! (`alpha` `f64`, `grid` `u64`, `correlation_length` `f64`, `rays` `u64`, `surfaces` `u32`,
-//! `seed` `u64`), `lost` (`u64`); per incidence node its rays (`u64`), albedos
+//! `seed` `u64`, the autocorrelation's index in [`Autocorrelation::ALL`] `u32`), `lost` (`u64`); per incidence node its rays (`u64`), albedos
 //! (`MAX_ORDER` `f64`), truncated fraction (`f64`), weights (`MAX_ORDER - 1` `f64`) and the
 //! lengths of its path arrays and of its backscatter arrays (`MAX_ORDER - 1` `u64` each, in
 //! `f32` values); then the path arrays (`f32`), node by node, order by order, then the
@@ -32,6 +32,7 @@
 //! entry at once each write a complete file (the last rename wins; both are valid).
 
 use super::{BankSpec, PathBank, MAX_ORDER, N_THETA};
+use crate::reference::microsurface::Autocorrelation;
 use crate::Result;
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufReader, BufWriter, Read, Write};
@@ -42,7 +43,7 @@ use std::time::{Duration, SystemTime};
 /// The first bytes of an entry.
 const MAGIC: [u8; 8] = *b"PPRBANK\n";
 /// The layout's version (module docs); bump it with any change of the layout.
-pub const FORMAT: u32 = 2;
+pub const FORMAT: u32 = 3;
 /// The longest version string a reader accepts.
 const MAX_VERSION_LEN: u32 = 256;
 /// Entry files end with this.
@@ -155,6 +156,7 @@ fn key_bytes(spec: &BankSpec, cap: usize, version: &str) -> Vec<u8> {
         spec.rays,
         spec.surfaces as u64,
         spec.seed,
+        spec.autocorrelation as u64,
     ] {
         k.extend_from_slice(&x.to_le_bytes());
     }
@@ -170,7 +172,16 @@ pub(super) fn entry_name_for(spec: &BankSpec, cap: usize, version: &str) -> Stri
     let mut sum = Checksum::new();
     sum.update(&key_bytes(spec, cap, version));
     // alpha is validated finite and in (0, 10]
-    format!("bank-alpha{:.4}-{:016x}{SUFFIX}", spec.alpha, sum.finish())
+    // the shape for people when it is not the default
+    let shape = match spec.autocorrelation {
+        Autocorrelation::Gaussian => String::new(),
+        a => format!("-{}", a.name()),
+    };
+    format!(
+        "bank-alpha{:.4}{shape}-{:016x}{SUFFIX}",
+        spec.alpha,
+        sum.finish()
+    )
 }
 
 /// Why an entry was not read.
@@ -239,6 +250,7 @@ fn encode<W: Write>(bank: &PathBank, cap: usize, version: &str, out: W) -> io::R
     w.write_all(&s.rays.to_le_bytes())?;
     w.write_all(&s.surfaces.to_le_bytes())?;
     w.write_all(&s.seed.to_le_bytes())?;
+    w.write_all(&(s.autocorrelation as u32).to_le_bytes())?;
     w.write_all(&bank.lost.to_le_bytes())?;
     for i in 0..N_THETA {
         w.write_all(&bank.rays[i].to_le_bytes())?;
@@ -267,7 +279,7 @@ fn encode<W: Write>(bank: &PathBank, cap: usize, version: &str, out: W) -> io::R
 
 /// The bytes of the header before the per-node records.
 fn fixed_header_len(version_len: u64) -> u64 {
-    8 + 4 + 4 + version_len + 4 + 4 + 8 + (8 + 8 + 8 + 8 + 4 + 8) + 8
+    8 + 4 + 4 + version_len + 4 + 4 + 8 + (8 + 8 + 8 + 8 + 4 + 8 + 4) + 8
 }
 
 /// The bytes of one node's record.
@@ -359,6 +371,12 @@ fn decode<R: Read>(
         rays: r.u64()?,
         surfaces: r.u32()?,
         seed: r.u64()?,
+        autocorrelation: {
+            let k = r.u32()?;
+            *Autocorrelation::ALL
+                .get(k as usize)
+                .ok_or_else(|| format!("autocorrelation {k} unknown"))?
+        },
     };
     let bits = |s: &BankSpec| {
         (
@@ -368,6 +386,7 @@ fn decode<R: Read>(
             s.rays,
             s.surfaces,
             s.seed,
+            s.autocorrelation,
         )
     };
     if bits(&spec) != bits(expected) {

@@ -62,6 +62,7 @@ pub(crate) fn bank() -> &'static PathBank {
             rays: 100_000,
             surfaces: 8,
             seed: 3,
+            autocorrelation: Default::default(),
         })
         .unwrap()
     })
@@ -265,6 +266,7 @@ fn orders_three_and_up_match_the_explicit_surface() {
         rays: 1_000_000,
         surfaces: 32,
         seed: 4,
+        autocorrelation: Default::default(),
     })
     .unwrap();
     let t = OrderTable::build(&bank, Eta::PerfectConductor, 3..=MAX_ORDER);

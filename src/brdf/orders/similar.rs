@@ -282,6 +282,7 @@ mod tests {
             rays: 20_000,
             surfaces: 2,
             seed: 3,
+            autocorrelation: Default::default(),
         };
         let b = PathBank::trace(&spec).unwrap();
         OrderTable::build(&b, Eta::Complex(C64::new(1.5, 0.0)), 2..=2)

@@ -12,6 +12,7 @@ fn spec() -> BankSpec {
         rays: 4000,
         surfaces: 2,
         seed: 5,
+        autocorrelation: Default::default(),
     }
 }
 

@@ -25,6 +25,7 @@ fn synthetic(paths: &[Vec<(Vec<V3>, V3)>]) -> PathBank {
             rays: 1000,
             surfaces: 1,
             seed: 1,
+            autocorrelation: Default::default(),
         },
         rays: vec![1000; N_THETA],
         paths: vec![vec![Vec::new(); MAX_ORDER - 1]; N_THETA],
