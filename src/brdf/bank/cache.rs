@@ -11,12 +11,12 @@
 //! Layout, little-endian: the magic `PPRBANK\n`, the format ([`FORMAT`], `u32`), the code
 //! version (`u32` length, UTF-8), `MAX_ORDER`, `N_THETA` (`u32`), the cap (`u64`), the spec
 //! (`alpha` `f64`, `grid` `u64`, `correlation_length` `f64`, `rays` `u64`, `surfaces` `u32`,
-//! `seed` `u64`, the autocorrelation's index in [`Autocorrelation::ALL`] `u32`), `lost` (`u64`); per incidence node its rays (`u64`), albedos
-//! (`MAX_ORDER` `f64`), truncated fraction (`f64`), weights (`MAX_ORDER - 1` `f64`) and the
-//! lengths of its path arrays and of its backscatter arrays (`MAX_ORDER - 1` `u64` each, in
-//! `f32` values); then the path arrays (`f32`), node by node, order by order, then the
-//! backscatter arrays likewise; last a checksum (`u64`, [`Checksum`]) of everything before
-//! it.
+//! `seed` `u64`, the autocorrelation's index in [`Autocorrelation::ALL`] `u32`), `lost`
+//! (`u64`); per incidence node its rays (`u64`), albedos (`MAX_ORDER` `f64`), truncated
+//! fraction (`f64`), weights (`MAX_ORDER - 1` `f64`) and the lengths of its path arrays and of
+//! its backscatter arrays (`MAX_ORDER - 1` `u64` each, in `f32` values); then the path arrays
+//! (`f32`), node by node, order by order, then the backscatter arrays likewise; last a checksum
+//! (`u64`, [`Checksum`]) of everything before it.
 //!
 //! # Trust
 //! [`PathBank::read_from`] rejects, with the reason, a file whose magic, format, version,
