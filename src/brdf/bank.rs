@@ -620,17 +620,17 @@ impl OrderTable {
         }
     }
 
-    /// The table at fraction `w` of the way from `self` to `other` (two roughness nodes):
-    /// per node, `M00` interpolated in `ln(M00 + eps)` (`eps = MIX_FLOOR` times the larger
-    /// table's largest `M00`) and the normalized elements `M / M00` linearly (where one
-    /// node's `M00` is 0, the other's). Orders >= 2 grow with alpha roughly exponentially
-    /// where the surface's geometry is just beginning to allow them (order 2 of aluminium
-    /// at 30 deg backscatter: 1.1e-3, 3.1e-3, 9.2e-3 at alpha 0.5, 0.55, 0.6), where the
-    /// linear mix was 68% high; measured at the midpoints 0.55 and 0.85 against banks
-    /// traced there, the largest M00 error of the logarithmic mix is 0.04-0.18 (linear
-    /// 0.05-0.68) except for aluminium's orders 3-8 at 0.55, 0.58 (linear 0.23), at a
-    /// direction where the lower node holds few paths: the geometric mean of noisy nodes
-    /// is biased low (`scripts/bank_alpha_interpolation.py`, CHANGELOG). A mix of
+    /// The table at fraction `w` of the way from `self` to `other` (two roughness nodes), at
+    /// fixed angles: per node, `M00` interpolated in `ln(M00 + eps)` (`eps = MIX_FLOOR`
+    /// times the larger table's largest `M00`) and the normalized elements `M / M00`
+    /// linearly (where one node's `M00` is 0, the other's). A material between nodes does
+    /// not take this `M00`: it reads each node's `M00` at the angles of the small-slope
+    /// similarity ([`crate::brdf::orders::similar::mix`], whose errors against banks traced
+    /// at the intervals' midpoints `docs/bank-alpha-interpolation.md` gives), and keeps
+    /// only the normalized elements of this mix. Why logarithmic: orders >= 2 grow with
+    /// alpha roughly exponentially where the surface's geometry is just beginning to allow
+    /// them (order 2 of aluminium at 30 deg backscatter: 1.1e-3, 3.1e-3, 9.2e-3 at alpha
+    /// 0.5, 0.55, 0.6), where a linear mix of `M00` was 68% high. A mix of
     /// normalized Mueller matrices with positive weights is one (a physical matrix), and
     /// it commutes with the reciprocity and mirror maps, so the table keeps its
     /// symmetries.
