@@ -1,7 +1,7 @@
 """The path banks' disk cache (issue 24, "Bad input"): a bank traced by one process is read
 by the next (the same BRDF, the entry untouched); a corrupt or truncated entry is traced
-again and replaced, never trusted; ``set_cache_dir`` refuses what is not a directory,
-naming ``cache_dir``. Small banks (``bank_rays`` of a few ten thousand: seconds), in a
+again and replaced, never trusted; ``prune_cache`` removes the entries this version cannot
+read; ``set_cache_dir`` refuses what is not a directory, naming ``cache_dir``. Small banks (``bank_rays`` of a few ten thousand: seconds), in a
 temporary directory of the test's own."""
 
 from __future__ import annotations
@@ -86,6 +86,39 @@ def test_a_bank_is_traced_once_and_read_by_the_next_process(cache: Path) -> None
         assert "not valid" in err and "tracing it again" in err, err
         np.testing.assert_array_equal(rebuilt, values)
         assert entry.read_bytes() == good
+
+
+def test_prune_cache_removes_what_this_version_cannot_read(tmp_path: Path) -> None:
+    """``prune_cache``: an entry another version wrote (the same file with another version
+    string in its header) and a file with a damaged header are removed, this version's
+    entry and files that are not entries are kept, and the kept entry is still read (not
+    traced again); ``all=True`` removes it too; bad arguments name the parameter."""
+    values, _ = _in_new_process(tmp_path)  # writes this version's entry
+    entry = _entry(tmp_path)
+    good = entry.read_bytes()
+    vlen = int.from_bytes(good[12:16], "little")
+    version = good[16 : 16 + vlen].decode()
+    old = version.replace(pprender.__version__, "0.0.9", 1).encode()
+    assert len(old) != 0 and old != version.encode()
+    foreign = tmp_path / "bank-alpha0.5000-00000000000000aa.ppbank"
+    foreign.write_bytes(good[:12] + len(old).to_bytes(4, "little") + old + good[16 + vlen :])
+    damaged = tmp_path / "bank-alpha0.5000-00000000000000bb.ppbank"
+    damaged.write_bytes(good[:20])
+    mine = tmp_path / "notes.txt"
+    mine.write_text("not a bank")
+    gone = foreign.stat().st_size + damaged.stat().st_size
+    assert pprender.prune_cache(path=tmp_path) == {"removed": 2, "bytes": gone, "kept": 1}
+    assert entry.exists() and mine.exists() and not foreign.exists() and not damaged.exists()
+    again, err = _in_new_process(tmp_path)
+    np.testing.assert_array_equal(again, values)
+    assert "tracing" not in err, err
+    assert pprender.prune_cache(all=True, path=str(tmp_path)) == {"removed": 1, "bytes": len(good), "kept": 0}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+    assert pprender.prune_cache(path=tmp_path / "absent") == {"removed": 0, "bytes": 0, "kept": 0}
+    with pytest.raises(pprender.Error, match="all"):
+        pprender.prune_cache(all="yes", path=tmp_path)  # type: ignore[arg-type]
+    with pytest.raises(pprender.Error, match="path"):
+        pprender.prune_cache(path=mine)
 
 
 def test_no_disk_cache(tmp_path: Path) -> None:

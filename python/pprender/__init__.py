@@ -74,6 +74,7 @@ __all__ = [
     "brdf_table",
     "cache_dir",
     "monostatic_table",
+    "prune_cache",
     "set_cache_dir",
     "specular",
     "white_furnace",
@@ -234,7 +235,8 @@ def set_cache_dir(path: str | os.PathLike[str] | None) -> None:
     machine, on first use, with a progress line on stderr (none when the environment
     variable ``PPRENDER_PROGRESS`` is ``0``), and read back by later processes. An entry
     that is missing, corrupt, or made by another pprender version or for other
-    parameters is traced again and replaced, never trusted; processes building the same
+    parameters is traced again and replaced, never trusted (entries another version wrote
+    stay on disk until :func:`prune_cache` removes them); processes building the same
     entry at once each write a whole file and rename it into place. If the directory
     cannot be created or written, a warning is printed once and banks stay in memory.
 
@@ -267,6 +269,44 @@ def cache_dir() -> pathlib.Path | None:
         The absolute directory, or None when path banks are kept in memory only.
     """
     return _core.cache_dir()
+
+
+def prune_cache(all: bool = False, path: str | os.PathLike[str] | None = None) -> dict[str, int]:
+    """Remove path banks from the disk cache that this pprender can never read.
+
+    Banks are keyed on the pprender version and the code that traces them, so after an
+    upgrade the old entries (0.1-0.3 GB each at alpha 0.3-1) are never read again, but
+    stay on disk until removed. This removes them: entries written by another version or
+    layout, or whose header cannot be read, and temporary files left by processes that
+    died while writing. This version's entries (for any alpha, rays or autocorrelation)
+    are kept; with ``all=True`` they are removed too (each is traced again on next use).
+    Files that are not path-bank entries are never touched.
+
+    Another pprender version that shares the directory will trace its banks again; a
+    process reading a removed entry keeps its open copy (POSIX).
+
+    Parameters
+    ----------
+    all : bool
+        Remove every entry, not only those this version cannot read.
+    path : str or os.PathLike or None
+        The cache directory to prune; None (default): :func:`cache_dir` (nothing to do
+        when the disk cache is off).
+
+    Returns
+    -------
+    dict
+        ``removed`` (entries removed), ``bytes`` (their size), ``kept`` (entries left).
+
+    Raises
+    ------
+    pprender.Error
+        Naming ``all`` (not a bool) or ``path`` (not a path, or not a directory).
+    OSError
+        An entry could not be removed (e.g. no permission).
+    """
+    removed, nbytes, kept = _core.prune_cache(all, path)
+    return {"removed": removed, "bytes": nbytes, "kept": kept}
 
 
 def white_furnace(distribution: str = "blinn_phong", **kwargs: object) -> Material:

@@ -132,7 +132,8 @@ mod material_args {
 ///     (empty or "off": memory only), else $XDG_CACHE_HOME/pprender, else
 ///     ~/.cache/pprender. Later processes read them (a new eta needs only its tables, a
 ///     few seconds); a missing, corrupt or stale entry (another pprender version or other
-///     parameters) is traced again, never trusted. The renderer's tables carry them
+///     parameters) is traced again, never trusted (pprender.prune_cache() removes the
+///     entries an older version left). The renderer's tables carry them
 ///     (docs/render-table.md). GGX and Blinn-Phong materials (the GGX paints of
 ///     pprender.materials among them) keep "seed": the banks' surfaces are Gaussian, so
 ///     Beckmann, and no explicit GGX surface is in the reference to check a GGX bank

@@ -583,6 +583,77 @@ fn warn_once(msg: String) {
     }
 }
 
+/// What [`prune`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Pruned {
+    /// Entries removed, and their bytes.
+    pub removed: usize,
+    pub bytes: u64,
+    /// Entries kept (this build's, for any parameters).
+    pub kept: usize,
+}
+
+/// The code version an entry's header names, if it is an entry of this [`FORMAT`] whose
+/// header can be read (only the header is read).
+fn entry_version(path: &Path) -> Option<String> {
+    let mut r = SummedReader {
+        inner: BufReader::new(File::open(path).ok()?),
+        sum: Checksum::new(),
+    };
+    if r.bytes::<8>().ok()? != MAGIC || r.u32().ok()? != FORMAT {
+        return None;
+    }
+    let vlen = r.u32().ok()?;
+    if vlen > MAX_VERSION_LEN {
+        return None;
+    }
+    let mut v = vec![0u8; vlen as usize];
+    r.fill(&mut v).ok()?;
+    String::from_utf8(v).ok()
+}
+
+/// Remove from `dir` the path-bank entries (`bank-*.ppbank`) that this build can never
+/// read: written by another pprender version or layout, or whose header cannot be read
+/// (with `all`, every entry), and the temporary files of writers that died. Entries of this
+/// build for other parameters are kept: other materials read them. Files that are not
+/// entries are never touched; a directory that does not exist holds nothing to remove.
+/// Another process still reading a removed entry keeps its open file (POSIX); another
+/// pprender version sharing the directory traces its banks again.
+pub fn prune(dir: &Path, all: bool) -> io::Result<Pruned> {
+    let mut out = Pruned::default();
+    let entries = match fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(out),
+        Err(e) => return Err(e),
+    };
+    sweep_stale_tmp(dir);
+    let version = code_version();
+    for e in entries {
+        let e = e?;
+        let name = e.file_name();
+        let name = name.to_string_lossy();
+        if !(name.starts_with("bank-") && name.ends_with(SUFFIX)) {
+            continue;
+        }
+        let path = e.path();
+        if !all && entry_version(&path).as_deref() == Some(version.as_str()) {
+            out.kept += 1;
+            continue;
+        }
+        let len = e.metadata().map(|m| m.len()).unwrap_or(0);
+        match fs::remove_file(&path) {
+            Ok(()) => {
+                out.removed += 1;
+                out.bytes += len;
+            }
+            // removed meanwhile by another process
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(out)
+}
+
 /// Removes the temporary files that processes which died while writing left in `dir`.
 fn sweep_stale_tmp(dir: &Path) {
     let Ok(entries) = fs::read_dir(dir) else {

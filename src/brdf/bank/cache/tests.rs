@@ -265,3 +265,59 @@ fn concurrent_writers_leave_a_valid_entry() {
     );
     assert_eq!(fs::read_dir(&dir.0).unwrap().count(), 1);
 }
+
+/// [`prune`] removes what this build can never read (another version's entry, a file with
+/// a damaged header, an old temporary file) and keeps this build's entries, for any
+/// parameters, and files that are not entries; with `all` it removes this build's entries
+/// too. A directory that does not exist holds nothing to remove.
+#[test]
+fn prune_removes_what_this_build_cannot_read() {
+    let b = bank();
+    let dir = TempDir::new("prune");
+    let d = &dir.0;
+    let current = d.join(entry_name(&b.spec, CAP));
+    b.write_to(&current, CAP).unwrap();
+    let other_cap = d.join(entry_name(&b.spec, CAP + 1));
+    b.write_to(&other_cap, CAP + 1).unwrap();
+    let foreign = d.join(entry_name_for(&b.spec, CAP, V));
+    b.write_versioned(&foreign, CAP, V).unwrap();
+    let damaged = d.join("bank-alpha0.7000-0123456789abcdef.ppbank");
+    let junk = b"PPRBANK\nnot a header";
+    fs::write(&damaged, junk).unwrap();
+    let other = d.join("notes.txt");
+    fs::write(&other, b"mine").unwrap();
+    let tmp = d.join(".bank-alpha0.7000-x.ppbank.tmp-1-1");
+    fs::write(&tmp, b"half").unwrap();
+    let old = SystemTime::now() - 2 * STALE_TMP;
+    File::options()
+        .write(true)
+        .open(&tmp)
+        .unwrap()
+        .set_modified(old)
+        .unwrap();
+    let foreign_len = fs::metadata(&foreign).unwrap().len();
+    let p = prune(d, false).unwrap();
+    assert_eq!(
+        p,
+        Pruned {
+            removed: 2,
+            bytes: foreign_len + junk.len() as u64,
+            kept: 2
+        }
+    );
+    for (f, there) in [
+        (&current, true),
+        (&other_cap, true),
+        (&foreign, false),
+        (&damaged, false),
+        (&other, true),
+        (&tmp, false),
+    ] {
+        assert_eq!(f.exists(), there, "{}", f.display());
+    }
+    assert_eq!(&PathBank::read_from(&current, &spec(), CAP).unwrap(), b);
+    let p = prune(d, true).unwrap();
+    assert_eq!((p.removed, p.kept), (2, 0));
+    assert!(!current.exists() && !other_cap.exists() && other.exists());
+    assert_eq!(prune(&d.join("absent"), true).unwrap(), Pruned::default());
+}
