@@ -107,6 +107,13 @@ def test_prune_cache_removes_what_this_version_cannot_read(tmp_path: Path) -> No
     mine = tmp_path / "notes.txt"
     mine.write_text("not a bank")
     gone = foreign.stat().st_size + damaged.stat().st_size
+    # a process about to trace a bank says what it can never read, and how to remove it
+    env = dict(os.environ, PPRENDER_CACHE_DIR=str(tmp_path), PPRENDER_PROGRESS="0")
+    other = SCRIPT.replace(f"bank_rays={RAYS}", f"bank_rays={RAYS + 2}")
+    r = subprocess.run([sys.executable, "-c", other], capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 0 and "2 path-bank entries" in r.stderr and "prune_cache()" in r.stderr, r.stderr
+    (newer,) = set(tmp_path.glob("bank-*.ppbank")) - {entry, foreign, damaged}
+    newer.unlink()  # (this version's: the counts below are of the first entry)
     assert pprender.prune_cache(path=tmp_path) == {"removed": 2, "bytes": gone, "kept": 1}
     assert entry.exists() and mine.exists() and not foreign.exists() and not damaged.exists()
     again, err = _in_new_process(tmp_path)

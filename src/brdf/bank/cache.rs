@@ -620,13 +620,21 @@ fn entry_version(path: &Path) -> Option<String> {
 /// Another process still reading a removed entry keeps its open file (POSIX); another
 /// pprender version sharing the directory traces its banks again.
 pub fn prune(dir: &Path, all: bool) -> io::Result<Pruned> {
+    sweep(dir, all, true)
+}
+
+/// [`prune`], or with `remove = false` only counting what it would remove (in `removed`
+/// and `bytes`).
+fn sweep(dir: &Path, all: bool, remove: bool) -> io::Result<Pruned> {
     let mut out = Pruned::default();
     let entries = match fs::read_dir(dir) {
         Ok(e) => e,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(out),
         Err(e) => return Err(e),
     };
-    sweep_stale_tmp(dir);
+    if remove {
+        sweep_stale_tmp(dir);
+    }
     let version = code_version();
     for e in entries {
         let e = e?;
@@ -641,6 +649,11 @@ pub fn prune(dir: &Path, all: bool) -> io::Result<Pruned> {
             continue;
         }
         let len = e.metadata().map(|m| m.len()).unwrap_or(0);
+        if !remove {
+            out.removed += 1;
+            out.bytes += len;
+            continue;
+        }
         match fs::remove_file(&path) {
             Ok(()) => {
                 out.removed += 1;
@@ -652,6 +665,26 @@ pub fn prune(dir: &Path, all: bool) -> io::Result<Pruned> {
         }
     }
     Ok(out)
+}
+
+/// Before the first bank a process traces: say on stderr how much of `dir` this build can
+/// never read (entries an older version left; [`prune`] removes them), if any.
+fn note_unreadable_once(dir: &Path) {
+    static NOTED: AtomicBool = AtomicBool::new(false);
+    if NOTED.swap(true, Ordering::Relaxed) {
+        return;
+    }
+    if let Ok(p) = sweep(dir, false, false) {
+        if p.removed > 0 {
+            eprintln!(
+                "pprender: {} path-bank entries ({:.0} MB) in {} are from another pprender \
+                 version (or damaged) and are never read; pprender.prune_cache() removes them",
+                p.removed,
+                p.bytes as f64 / 1e6,
+                dir.display()
+            );
+        }
+    }
 }
 
 /// Removes the temporary files that processes which died while writing left in `dir`.
@@ -701,6 +734,7 @@ pub fn cached(
             path.display()
         ),
     }
+    note_unreadable_once(dir);
     let bank = build()?;
     if let Err(e) = fs::create_dir_all(dir) {
         warn_once(format!(

@@ -296,6 +296,10 @@ fn prune_removes_what_this_build_cannot_read() {
         .set_modified(old)
         .unwrap();
     let foreign_len = fs::metadata(&foreign).unwrap().len();
+    // counting only (the notice before a process's first trace) removes nothing
+    let counted = sweep(d, false, false).unwrap();
+    assert_eq!((counted.removed, counted.kept), (2, 2));
+    assert!(foreign.exists() && damaged.exists() && tmp.exists());
     let p = prune(d, false).unwrap();
     assert_eq!(
         p,
