@@ -67,6 +67,12 @@ pub fn render(
         ));
     }
     paths::check_paths_memory(mesh, sensor, rotations.len(), outputs)?;
+    // the workers report as they finish, not in order: the caller sees a count that never
+    // goes down and ends at the total
+    let ordered = Ordered::new(progress);
+    let ordered_fn = |done: usize, total: usize| ordered.report(done, total);
+    let progress: Progress =
+        progress.map(|_| &ordered_fn as &(dyn Fn(usize, usize) -> bool + Sync));
     let beta = sensor.bistatic_angle;
     // with inter-reflections the backend's pass is the first half of the progress
     let with_paths = sensor.paths.bounces > 1;
@@ -171,6 +177,31 @@ pub fn render(
     })
 }
 
+/// A progress callback whose counts never go down: the backends' workers count attitudes
+/// atomically but report them from their own threads, so a smaller count could reach the
+/// caller after a larger one (a render's last report was (5, 6) after (6, 6)). A late
+/// smaller count is reported as the largest so far (the callback is still asked whether to
+/// go on), and reports are made one at a time.
+struct Ordered<'a> {
+    inner: Progress<'a>,
+    last: std::sync::Mutex<usize>,
+}
+
+impl<'a> Ordered<'a> {
+    fn new(inner: Progress<'a>) -> Self {
+        Ordered {
+            inner,
+            last: std::sync::Mutex::new(0),
+        }
+    }
+
+    fn report(&self, done: usize, total: usize) -> bool {
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        *last = (*last).max(done);
+        self.inner.is_none_or(|p| p(*last, total))
+    }
+}
+
 /// What to render, and on what: the sensor set-up, the outputs, the backend and the BRDF
 /// table grid (unused by the reference).
 #[derive(Clone, Copy)]
@@ -195,6 +226,26 @@ pub struct RenderOutput {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Regression (a flaky `tests/test_settings.py` run: the last report was (5, 6) after
+    /// (6, 6)): counts that arrive out of order reach the callback never going down and
+    /// ending at the largest; a late count still asks whether to go on; none is lost.
+    #[test]
+    fn progress_counts_never_go_down() {
+        let seen = std::sync::Mutex::new(Vec::new());
+        let stop_at = 7;
+        let f = |d: usize, t: usize| {
+            seen.lock().unwrap().push((d, t));
+            d < stop_at
+        };
+        let o = Ordered::new(Some(&f));
+        let calls = [1, 2, 4, 6, 3, 5];
+        assert!(calls.iter().all(|&d| o.report(d, 6)));
+        let got: Vec<usize> = seen.lock().unwrap().iter().map(|x| x.0).collect();
+        assert_eq!(got, [1, 2, 4, 6, 6, 6]);
+        assert!(!o.report(7, 8) && !o.report(2, 8), "a stop is still heard");
+        assert!(Ordered::new(None).report(3, 6));
+    }
 
     /// The device strings the Python side sends name the backends; anything else is
     /// refused with the adapter choices, as before there was a `Backend`.
