@@ -330,6 +330,22 @@ fn expect<T: PartialEq + std::fmt::Debug>(
 
 /// Reads a bank written by [`encode`] from `r`, a file of `file_len` bytes; it must be
 /// `expected`'s bank thinned to `cap` by code of `version` (module docs).
+/// The start of an entry's header: the magic, the format, and the code version's bytes.
+fn read_version<R: Read>(r: &mut SummedReader<R>) -> std::result::Result<Vec<u8>, String> {
+    let magic: [u8; 8] = r.bytes()?;
+    if magic != MAGIC {
+        return Err("not a path bank (magic bytes)".into());
+    }
+    expect("the format", r.u32()?, FORMAT)?;
+    let vlen = r.u32()?;
+    if vlen > MAX_VERSION_LEN {
+        return Err(format!("a version string of {vlen} bytes"));
+    }
+    let mut v = vec![0u8; vlen as usize];
+    r.fill(&mut v)?;
+    Ok(v)
+}
+
 fn decode<R: Read>(
     r: R,
     file_len: u64,
@@ -344,17 +360,7 @@ fn decode<R: Read>(
     if file_len < 8 {
         return Err(format!("{file_len} bytes: not a path bank"));
     }
-    let magic: [u8; 8] = r.bytes()?;
-    if magic != MAGIC {
-        return Err("not a path bank (magic bytes)".into());
-    }
-    expect("the format", r.u32()?, FORMAT)?;
-    let vlen = r.u32()?;
-    if vlen > MAX_VERSION_LEN {
-        return Err(format!("a version string of {vlen} bytes"));
-    }
-    let mut v = vec![0u8; vlen as usize];
-    r.fill(&mut v)?;
+    let v = read_version(&mut r)?;
     let found = String::from_utf8_lossy(&v);
     if found != version {
         return Err(format!(
@@ -398,7 +404,7 @@ fn decode<R: Read>(
     let mut truncated = Vec::with_capacity(N_THETA);
     let mut weights = Vec::with_capacity(N_THETA);
     let mut lens = Vec::with_capacity(N_THETA);
-    let header = fixed_header_len(vlen as u64) + NODE_RECORD * N_THETA as u64;
+    let header = fixed_header_len(v.len() as u64) + NODE_RECORD * N_THETA as u64;
     if file_len < header + 8 {
         return Err(format!(
             "{file_len} bytes, shorter than its header (the file ends early)"
@@ -593,23 +599,14 @@ pub struct Pruned {
     pub kept: usize,
 }
 
-/// The code version an entry's header names, if it is an entry of this [`FORMAT`] whose
-/// header can be read (only the header is read).
-fn entry_version(path: &Path) -> Option<String> {
+/// The code version (bytes) an entry's header names, if it is an entry of this [`FORMAT`]
+/// whose header can be read (only the header is read).
+fn entry_version(path: &Path) -> Option<Vec<u8>> {
     let mut r = SummedReader {
         inner: BufReader::new(File::open(path).ok()?),
         sum: Checksum::new(),
     };
-    if r.bytes::<8>().ok()? != MAGIC || r.u32().ok()? != FORMAT {
-        return None;
-    }
-    let vlen = r.u32().ok()?;
-    if vlen > MAX_VERSION_LEN {
-        return None;
-    }
-    let mut v = vec![0u8; vlen as usize];
-    r.fill(&mut v).ok()?;
-    String::from_utf8(v).ok()
+    read_version(&mut r).ok()
 }
 
 /// Remove from `dir` the path-bank entries (`bank-*.ppbank`) that this build can never
@@ -644,25 +641,21 @@ fn sweep(dir: &Path, all: bool, remove: bool) -> io::Result<Pruned> {
             continue;
         }
         let path = e.path();
-        if !all && entry_version(&path).as_deref() == Some(version.as_str()) {
+        if !all && entry_version(&path).as_deref() == Some(version.as_bytes()) {
             out.kept += 1;
             continue;
         }
         let len = e.metadata().map(|m| m.len()).unwrap_or(0);
-        if !remove {
-            out.removed += 1;
-            out.bytes += len;
-            continue;
-        }
-        match fs::remove_file(&path) {
-            Ok(()) => {
-                out.removed += 1;
-                out.bytes += len;
+        if remove {
+            match fs::remove_file(&path) {
+                Ok(()) => {}
+                // removed meanwhile by another process
+                Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+                Err(e) => return Err(e),
             }
-            // removed meanwhile by another process
-            Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e),
         }
+        out.removed += 1;
+        out.bytes += len;
     }
     Ok(out)
 }
