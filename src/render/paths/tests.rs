@@ -415,6 +415,20 @@ fn path_uniforms_are_an_even_lattice_per_pixel() {
     assert_eq!(scaled(2), [0.5, 0.75, 0.375, 0.5625]);
     assert_eq!(scaled(3), [0.5, 0.75, 0.125, 0.3125]);
     assert_eq!(sobol(3, 2), v[2][0] ^ v[2][1]);
+    // the byte tables give each index's XOR of its bits' direction numbers
+    let mut rand = uniform_stream(0x2545_f491_4f6c_dd1d);
+    for k in 0..4000u32 {
+        let index = match k {
+            0..=1023 => k,
+            _ => (rand() * 4_294_967_296.0) as u32,
+        };
+        for (d, vd) in v.iter().enumerate() {
+            let by_bits = (0..32)
+                .filter(|b| index >> b & 1 == 1)
+                .fold(0, |x, b| x ^ vd[b]);
+            assert_eq!(sobol(index, d), by_bits, "index {index}, dim {d}");
+        }
+    }
     assert_ne!(uniforms(3, 17, 0), uniforms(4, 17, 0));
     assert_ne!(uniforms(3, 17, 0), uniforms(3, 18, 0));
 }
