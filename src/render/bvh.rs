@@ -59,7 +59,13 @@ pub struct Bvh {
 /// the triangle's plane (determinant zero).
 #[inline]
 pub fn intersect(o: V3, d: V3, tri: &[V3; 3], t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
-    intersect_edges(o, d, &[tri[0], tri[1] - tri[0], tri[2] - tri[0]], t_min, t_max)
+    intersect_edges(
+        o,
+        d,
+        &[tri[0], tri[1] - tri[0], tri[2] - tri[0]],
+        t_min,
+        t_max,
+    )
 }
 
 /// [`intersect`] with the triangle as its first vertex and its two edges from it,
@@ -138,7 +144,10 @@ impl Bvh {
         let tris: Vec<[V3; 3]> = items.iter().map(|(_, t)| *t).collect();
         Bvh {
             order: items.iter().map(|(i, _)| *i).collect(),
-            edges: tris.iter().map(|t| [t[0], t[1] - t[0], t[2] - t[0]]).collect(),
+            edges: tris
+                .iter()
+                .map(|t| [t[0], t[1] - t[0], t[2] - t[0]])
+                .collect(),
             tris,
             nodes,
         }
@@ -278,7 +287,9 @@ impl Bvh {
                         if skip == Some(self.order[k]) {
                             continue;
                         }
-                        if let Some((t, u, v)) = intersect_edges(o, d, &self.edges[k], t_min, *t_far) {
+                        if let Some((t, u, v)) =
+                            intersect_edges(o, d, &self.edges[k], t_min, *t_far)
+                        {
                             *t_far = t;
                             if on_hit(k, t, u, v) {
                                 return;
