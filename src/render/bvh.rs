@@ -47,8 +47,6 @@ pub struct Hit {
 #[derive(Debug, Clone)]
 pub struct Bvh {
     tris: Vec<[V3; 3]>,
-    /// `tris` as `[a, b - a, c - a]` ([`intersect_edges`]).
-    edges: Vec<[V3; 3]>,
     /// `order[k]`: the original index of the `k`-th triangle of `tris`.
     order: Vec<usize>,
     nodes: Vec<Node>,
@@ -59,33 +57,15 @@ pub struct Bvh {
 /// the triangle's plane (determinant zero).
 #[inline]
 pub fn intersect(o: V3, d: V3, tri: &[V3; 3], t_min: f64, t_max: f64) -> Option<(f64, f64, f64)> {
-    intersect_edges(
-        o,
-        d,
-        &[tri[0], tri[1] - tri[0], tri[2] - tri[0]],
-        t_min,
-        t_max,
-    )
-}
-
-/// [`intersect`] with the triangle as its first vertex and its two edges from it,
-/// `[a, b - a, c - a]` (as the tree keeps them: the same bits, without the subtractions
-/// per test).
-#[inline]
-fn intersect_edges(
-    o: V3,
-    d: V3,
-    &[a, e1, e2]: &[V3; 3],
-    t_min: f64,
-    t_max: f64,
-) -> Option<(f64, f64, f64)> {
+    let e1 = tri[1] - tri[0];
+    let e2 = tri[2] - tri[0];
     let p = cross(d, e2);
     let det = dot(e1, p);
     if det == 0.0 || !det.is_finite() {
         return None;
     }
     let inv = 1.0 / det;
-    let s = o - a;
+    let s = o - tri[0];
     let u = dot(s, p) * inv;
     if !(0.0..=1.0).contains(&u) {
         return None;
@@ -141,14 +121,9 @@ impl Bvh {
         if !items.is_empty() {
             build(&mut items, 0, &mut nodes);
         }
-        let tris: Vec<[V3; 3]> = items.iter().map(|(_, t)| *t).collect();
         Bvh {
             order: items.iter().map(|(i, _)| *i).collect(),
-            edges: tris
-                .iter()
-                .map(|t| [t[0], t[1] - t[0], t[2] - t[0]])
-                .collect(),
-            tris,
+            tris: items.into_iter().map(|(_, t)| t).collect(),
             nodes,
         }
     }
@@ -287,9 +262,7 @@ impl Bvh {
                         if skip == Some(self.order[k]) {
                             continue;
                         }
-                        if let Some((t, u, v)) =
-                            intersect_edges(o, d, &self.edges[k], t_min, *t_far)
-                        {
+                        if let Some((t, u, v)) = intersect(o, d, &self.tris[k], t_min, *t_far) {
                             *t_far = t;
                             if on_hit(k, t, u, v) {
                                 return;
