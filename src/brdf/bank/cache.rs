@@ -328,8 +328,6 @@ fn expect<T: PartialEq + std::fmt::Debug>(
     }
 }
 
-/// Reads a bank written by [`encode`] from `r`, a file of `file_len` bytes; it must be
-/// `expected`'s bank thinned to `cap` by code of `version` (module docs).
 /// The start of an entry's header: the magic, the format, and the code version's bytes.
 fn read_version<R: Read>(r: &mut SummedReader<R>) -> std::result::Result<Vec<u8>, String> {
     let magic: [u8; 8] = r.bytes()?;
@@ -346,6 +344,8 @@ fn read_version<R: Read>(r: &mut SummedReader<R>) -> std::result::Result<Vec<u8>
     Ok(v)
 }
 
+/// Reads a bank written by [`encode`] from `r`, a file of `file_len` bytes; it must be
+/// `expected`'s bank thinned to `cap` by code of `version` (module docs).
 fn decode<R: Read>(
     r: R,
     file_len: u64,
