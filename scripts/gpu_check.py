@@ -57,6 +57,11 @@ of ``scripts/gpu_bundle.sh`` (no Rust, no Mitsuba, no registry), or directly::
    several resolutions and triangle counts, the device's time per attitude from the
    stages. Time that stays put as pixels and triangles grow is per-attitude overhead
    (render passes, dispatches), not shading or rasterization.
+9. Ray casting (``benchmarks/bench_raycast.py``): closest hits per second of the
+   renderer's tree walked in f32 by ``shaders/raycast.wgsl`` on the device, against the
+   same tree walked in f64 on the CPU's threads, on the 3U CubeSat (and, without
+   ``--quick``, the same wrapped in MLI, 1.3 million triangles): the first step of paths
+   traced in a kernel (issue 23), measured. With ``--quick``: 2,000 rays, the small mesh.
 
 Exit status 1 if any graded check (2, 3, 4) fails, 2 if the requested device is missing.
 """
@@ -77,6 +82,7 @@ import pprender
 from pprender import materials, models
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "benchmarks"))
+import bench_raycast  # noqa: E402  (the ray-casting benchmark's)
 from bench_render import best_time, cubesat_scene, interreflection_rows, random_quaternions  # noqa: E402  (the render benchmark's)
 
 #: Largest allowed errors of the f32 kernel against the f64 twin (module docstring).
@@ -386,6 +392,7 @@ def breakdown(device: str, batch: int = BREAKDOWN_BATCH) -> list[dict[str, Any]]
 
 #: Batch size of the scaling rows (section 8 of the module docstring).
 SCALING_BATCH = 256
+RAYCAST_RAYS = 1_000_000
 
 
 def scaling(device: str, batch: int = SCALING_BATCH) -> list[dict[str, Any]]:
@@ -451,7 +458,8 @@ def throughput(device: str, budget: float, once: dict[str, float]) -> list[dict[
 def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[str, Any]],
            parts: list[dict[str, Any]], scale: list[dict[str, Any]], once: dict[str, float], device: str,
            seconds: float, paths: list[str] | None = None, roll: dict[str, Any] | None = None,
-           area: dict[str, Any] | None = None, surface: list[dict[str, Any]] | None = None) -> str:
+           area: dict[str, Any] | None = None, surface: list[dict[str, Any]] | None = None,
+           rays: list[dict[str, Any]] | None = None) -> str:
     lines = ["# GPU check", ""]
     if info.get("device_type") == "Cpu":
         lines += [
@@ -578,6 +586,12 @@ def report(info: dict[str, Any], agree: list[dict[str, Any]], speed: list[dict[s
     ]
     for r in scale:
         lines.append(f"| {r['case']} | {r['rate']:.1f} | {r['call_us']:.1f} | {r['device_us']:.1f} |")
+    if rays:
+        lines += ["", "## Ray casting: the renderer's tree walked in the kernel and on the CPU", "",
+                  "The ray-casting benchmark (`benchmarks/bench_raycast.py`; its docstring says what the rays "
+                  f"are and what the columns mean), run here: `f64` on {os.cpu_count()} CPU threads, the "
+                  "kernel on the device, Embree (one thread) where embreex is installed.", ""]
+        lines += bench_raycast.table(rays) + [""] + bench_raycast.summary(rays)
     lines += ["", "One-off costs:", ""]
     lines += [f"- {k}: {v:.3f}" for k, v in once.items()]
     lines += ["", "Adapter limits:", ""]
@@ -628,8 +642,11 @@ def main(argv: list[str] | None = None) -> int:
     if not a.quick:
         print("inter-reflections:", flush=True)
         paths = interreflection_rows(a.device, 3)
+    print("ray casting:", flush=True)
+    rays = (bench_raycast.measure([a.device], 2000, 1, bench_raycast.MESHES[:1]) if a.quick
+            else bench_raycast.measure([a.device], RAYCAST_RAYS, 3))
     text = report(info, agree, speed, parts, scale, once, a.device, time.perf_counter() - t0, paths, roll,
-                  area, surface)
+                  area, surface, rays)
     print(text)
     if a.write:
         with open(a.write, "w") as f:

@@ -48,6 +48,38 @@ def test_closest_hits_match_trimesh_embree(mesh) -> None:
     assert same > 0.999, same
 
 
+def test_the_kernel_on_lavapipe_matches_trimesh_embree(mesh) -> None:
+    """The same tree walked in f32 by ``shaders/raycast.wgsl`` on lavapipe (the ray-casting
+    benchmark's kernel rows), against Embree: f32 distances (limit 1e-5 of the size: f32
+    rounding of coordinates of order the size; measured 6.2e-7), the same triangles
+    (measured: all 2,479 hits), and at most 2 of 4000 rays hit by one and missed by the
+    other (an edge in f32; measured 0)."""
+    o, d = _rays(mesh, 4000, 3)
+    t, tri = _core.ray_cast(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), o, d,
+                            device="cpu")
+    loc, idx_ray, idx_tri = mesh.ray.intersects_location(o, d, multiple_hits=False)
+    want_t = np.full(len(o), np.inf)
+    want_tri = np.full(len(o), -1)
+    want_t[idx_ray] = np.einsum("ij,ij->i", loc - o[idx_ray], d[idx_ray])
+    want_tri[idx_ray] = idx_tri
+    size = float(np.max(mesh.extents))
+    both = np.isfinite(t) & np.isfinite(want_t)
+    assert both.sum() > 2000
+    assert np.max(np.abs(t[both] - want_t[both])) < 1e-5 * size
+    assert np.sum(np.isfinite(t) != np.isfinite(want_t)) <= 2
+    assert (tri[both] == want_tri[both]).mean() > 0.999
+
+
+def test_timed_call_reports_its_stages(mesh) -> None:
+    v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+    o, d = _rays(mesh, 100, 4)
+    t, tri, seconds = _core.ray_cast_timed(v, f, o, d)
+    want_t, want_tri = _core.ray_cast(v, f, o, d)
+    np.testing.assert_array_equal(t, want_t)
+    np.testing.assert_array_equal(tri, want_tri)
+    assert set(seconds) == {"build", "walk"} and all(s >= 0 for s in seconds.values())
+
+
 def test_bad_input_is_refused_with_the_parameter_named(mesh) -> None:
     v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
     o, d = _rays(mesh, 3, 2)
@@ -57,3 +89,8 @@ def test_bad_input_is_refused_with_the_parameter_named(mesh) -> None:
         _core.ray_cast(v, f, o[:, :2], d)
     with pytest.raises(pprender.Error, match="same length"):
         _core.ray_cast(v, f, o, d[:2])
+    with pytest.raises(pprender.Error, match="device.*f64"):
+        _core.ray_cast(v, f, o, d, device="f32")
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(pprender.Error, match="t_min"):
+            _core.ray_cast(v, f, o, d, t_min=bad)

@@ -44,6 +44,14 @@ def test_gpu_check_on_lavapipe(tmp_path) -> None:
     assert "| profile + mueller + range |" in text
     assert "## What the device time scales with: profile only (Stokes, H), batch 4" in text
     assert "| icosphere, 20480 triangles, 128x128 |" in text
+    assert "## Ray casting: the renderer's tree walked in the kernel and on the CPU" in text
+    # primary and secondary rays, f64 and the kernel on lavapipe (+ Embree, installed here),
+    # the kernel agreeing with the f64 tree on every one of the 2,000 rays' hits
+    for kind in ("primary", "secondary"):
+        row = next(line for line in text.splitlines()
+                   if line.startswith(f"| CubeSat 3U | 11,840 | {kind} |") and "kernel (llvmpipe" in line)
+        assert row.split("|")[9:11] == [" 0 ", " 0 "], row
+    assert "x the f64 tree's rate over the 2 rows." in text
 
 
 def test_gpu_check_grades_a_wrong_kernel() -> None:

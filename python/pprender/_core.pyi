@@ -356,4 +356,13 @@ def ray_cast(
     origins: npt.NDArray[np.float64],
     directions: npt.NDArray[np.float64],
     t_min: float = 0.0,
+    device: str = "f64",
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]: ...
+def ray_cast_timed(
+    vertices: npt.NDArray[np.float64],
+    faces: npt.NDArray[np.int64],
+    origins: npt.NDArray[np.float64],
+    directions: npt.NDArray[np.float64],
+    t_min: float = 0.0,
+    device: str = "f64",
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], dict[str, float]]: ...

@@ -578,11 +578,14 @@ type Hits<'py> = (
     Bound<'py, numpy::PyArray1<i64>>,
 );
 
-/// The closest hit of each ray `origins[i] + t directions[i]`, `t > t_min`, on the mesh
-/// (`crate::render::bvh::Bvh`, f64): returns `(t, tri)`, `t = inf` and `tri = -1` for a
-/// miss. For tests against other ray casters (trimesh).
+/// The closest hit of each ray `origins[i] + t directions[i]`, `t > t_min`, on the mesh:
+/// returns `(t, tri)`, `t = inf` and `tri = -1` for a miss. `device`: `"f64"` walks the
+/// tree on the CPU in f64 (`crate::render::bvh::Bvh`, the rays shared among rayon's
+/// threads); `"auto"`, `"cpu"`/`"lavapipe"` or `"gpu"` walk the same tree in the kernel
+/// (`shaders/raycast.wgsl`, f32) on that adapter. For tests against other ray casters
+/// (trimesh, Embree) and the ray-casting benchmark.
 #[pyfunction]
-#[pyo3(signature = (vertices, faces, origins, directions, t_min=0.0))]
+#[pyo3(signature = (vertices, faces, origins, directions, t_min=0.0, device="f64"))]
 fn ray_cast<'py>(
     py: Python<'py>,
     vertices: PyReadonlyArray2<'py, f64>,
@@ -590,7 +593,53 @@ fn ray_cast<'py>(
     origins: PyReadonlyArray2<'py, f64>,
     directions: PyReadonlyArray2<'py, f64>,
     t_min: f64,
+    device: &str,
 ) -> PyResult<Hits<'py>> {
+    let (hits, _) = cast_rays(py, vertices, faces, origins, directions, t_min, device)?;
+    Ok(hits)
+}
+
+/// [`ray_cast`], and the seconds its stages took: `{"build": the tree, "walk": the rays
+/// (for the kernel: the pipeline, the uploads, the dispatches and the read-back)}`. For
+/// `benchmarks/bench_raycast.py`.
+#[pyfunction]
+#[pyo3(signature = (vertices, faces, origins, directions, t_min=0.0, device="f64"))]
+fn ray_cast_timed<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, i64>,
+    origins: PyReadonlyArray2<'py, f64>,
+    directions: PyReadonlyArray2<'py, f64>,
+    t_min: f64,
+    device: &str,
+) -> PyResult<TimedHits<'py>> {
+    let ((t, tri), (build, walk)) =
+        cast_rays(py, vertices, faces, origins, directions, t_min, device)?;
+    let d = PyDict::new(py);
+    d.set_item("build", build)?;
+    d.set_item("walk", walk)?;
+    Ok((t, tri, d))
+}
+
+/// `(t, tri, seconds)` ([`ray_cast_timed`]).
+type TimedHits<'py> = (
+    Bound<'py, numpy::PyArray1<f64>>,
+    Bound<'py, numpy::PyArray1<i64>>,
+    Bound<'py, PyDict>,
+);
+
+/// [`Hits`] and the seconds of the tree's build and of the walk.
+type Timed<'py> = (Hits<'py>, (f64, f64));
+
+fn cast_rays<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, i64>,
+    origins: PyReadonlyArray2<'py, f64>,
+    directions: PyReadonlyArray2<'py, f64>,
+    t_min: f64,
+    device: &str,
+) -> PyResult<Timed<'py>> {
     use crate::optics::frames::V3;
     let v = rows3(&vertices, "vertices")?;
     let o = rows3(&origins, "origins")?;
@@ -615,21 +664,61 @@ fn ray_cast<'py>(
         }
         tris.push(f.map(|k| V3::from(v[k as usize])));
     }
-    let (t, tri): (Vec<f64>, Vec<i64>) = py.detach(|| {
-        let bvh = crate::render::bvh::Bvh::new(&tris);
-        o.iter()
-            .zip(&d)
-            .map(
-                |(o, d)| match bvh.closest_hit(V3::from(*o), V3::from(*d), t_min, f64::INFINITY) {
-                    Some(h) => (h.t, h.tri as i64),
-                    None => (f64::INFINITY, -1),
-                },
+    if !(t_min >= 0.0 && t_min.is_finite()) {
+        return Err(crate::Error::param("t_min", t_min, "a finite t_min >= 0").into());
+    }
+    let choice = match device {
+        "f64" => None,
+        _ => Some(DeviceChoice::parse(device).map_err(|_| {
+            crate::Error::param(
+                "device",
+                format!("{device:?}"),
+                "\"f64\", \"auto\", \"cpu\", \"lavapipe\" or \"gpu\"",
             )
-            .unzip()
-    });
+        })?),
+    };
+    let (t, tri, seconds) = py.detach(|| -> crate::Result<_> {
+        use rayon::prelude::*;
+        use std::time::Instant;
+        let g = choice.map(gpu::context).transpose()?;
+        let start = Instant::now();
+        let bvh = crate::render::bvh::Bvh::new(&tris);
+        let built = Instant::now();
+        let (t, tri): (Vec<f64>, Vec<i64>) = match g {
+            None => o
+                .par_iter()
+                .zip(&d)
+                .map(|(o, d)| {
+                    match bvh.closest_hit(V3::from(*o), V3::from(*d), t_min, f64::INFINITY) {
+                        Some(h) => (h.t, h.tri as i64),
+                        None => (f64::INFINITY, -1),
+                    }
+                })
+                .unzip(),
+            Some(g) => {
+                let rays: Vec<_> = o
+                    .iter()
+                    .zip(&d)
+                    .map(|(o, d)| (V3::from(*o), V3::from(*d), t_min, f64::INFINITY))
+                    .collect();
+                gpu::raycast::closest_hits(&g, &bvh, &rays)?
+                    .into_iter()
+                    .map(|h| match h {
+                        Some(h) => (h.t as f64, h.tri as i64),
+                        None => (f64::INFINITY, -1),
+                    })
+                    .unzip()
+            }
+        };
+        let seconds = ((built - start).as_secs_f64(), built.elapsed().as_secs_f64());
+        Ok((t, tri, seconds))
+    })?;
     Ok((
-        Array1::from(t).into_pyarray(py),
-        Array1::from(tri).into_pyarray(py),
+        (
+            Array1::from(t).into_pyarray(py),
+            Array1::from(tri).into_pyarray(py),
+        ),
+        seconds,
     ))
 }
 
@@ -662,5 +751,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sample_offsets, m)?)?;
     m.add_function(wrap_pyfunction!(device_info, m)?)?;
     m.add_function(wrap_pyfunction!(ray_cast, m)?)?;
+    m.add_function(wrap_pyfunction!(ray_cast_timed, m)?)?;
     Ok(())
 }

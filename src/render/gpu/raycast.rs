@@ -22,12 +22,26 @@ pub struct GpuHit {
     pub v: f32,
 }
 
+/// Rays per dispatch: 32 MiB of rays and 16 MiB of hits, within wgpu's default limits
+/// (128 MiB a storage binding, 65535 workgroups of 64 a dimension).
+pub const RAYS_PER_DISPATCH: usize = 1 << 20;
+
 /// The closest hit of each ray `(o, d, t_min, t_max)` (`t_min >= 0`) against `bvh` on the
-/// device `g`: `None` for a miss.
+/// device `g`: `None` for a miss. The kernel is built once and walks the rays in chunks of
+/// [`RAYS_PER_DISPATCH`].
 pub fn closest_hits(
     g: &Gpu,
     bvh: &Bvh,
     rays: &[(V3, V3, f64, f64)],
+) -> Result<Vec<Option<GpuHit>>> {
+    closest_hits_in_chunks(g, bvh, rays, RAYS_PER_DISPATCH)
+}
+
+fn closest_hits_in_chunks(
+    g: &Gpu,
+    bvh: &Bvh,
+    rays: &[(V3, V3, f64, f64)],
+    per_dispatch: usize,
 ) -> Result<Vec<Option<GpuHit>>> {
     if rays.is_empty() {
         return Ok(Vec::new());
@@ -35,17 +49,7 @@ pub fn closest_hits(
     let dev = &g.device;
     let nodes = bvh.gpu_nodes();
     let tris = bvh.gpu_triangles();
-    let ray_data: Vec<[f32; 4]> = rays
-        .iter()
-        .flat_map(|&(o, d, t0, t1)| {
-            [
-                [o.x as f32, o.y as f32, o.z as f32, t0 as f32],
-                [d.x as f32, d.y as f32, d.z as f32, t1 as f32],
-            ]
-        })
-        .collect();
-    let out_bytes = (rays.len() * 16) as u64;
-    let raw = error_scoped(dev, || {
+    error_scoped(dev, || {
         let storage = |label: &str, data: &[u8]| {
             let mut bytes = data.to_vec();
             bytes.resize(bytes.len().max(32), 0);
@@ -57,19 +61,6 @@ pub fn closest_hits(
         };
         let node_buf = storage("raycast nodes", bytemuck::cast_slice(&nodes));
         let tri_buf = storage("raycast triangles", bytemuck::cast_slice(&tris));
-        let ray_buf = storage("raycast rays", bytemuck::cast_slice(&ray_data));
-        let hits = create_buffer(
-            dev,
-            "raycast hits",
-            out_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        );
-        let read = create_buffer(
-            dev,
-            "raycast read",
-            out_bytes,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
         let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raycast.wgsl"),
             source: wgpu::ShaderSource::Wgsl(shaders::RAYCAST.into()),
@@ -82,61 +73,85 @@ pub fn closest_hits(
             compilation_options: Default::default(),
             cache: None,
         });
-        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("raycast"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: node_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: tri_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: ray_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &hits,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(out_bytes),
-                    }),
-                },
-            ],
-        });
-        let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("raycast"),
-        });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        let mut out = Vec::with_capacity(rays.len());
+        for chunk in rays.chunks(per_dispatch) {
+            let ray_data: Vec<[f32; 4]> = chunk
+                .iter()
+                .flat_map(|&(o, d, t0, t1)| {
+                    [
+                        [o.x as f32, o.y as f32, o.z as f32, t0 as f32],
+                        [d.x as f32, d.y as f32, d.z as f32, t1 as f32],
+                    ]
+                })
+                .collect();
+            let out_bytes = (chunk.len() * 16) as u64;
+            let ray_buf = storage("raycast rays", bytemuck::cast_slice(&ray_data));
+            let hits = create_buffer(
+                dev,
+                "raycast hits",
+                out_bytes,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            );
+            let read = create_buffer(
+                dev,
+                "raycast read",
+                out_bytes,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            );
+            let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raycast"),
-                timestamp_writes: None,
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: node_buf.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: tri_buf.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: ray_buf.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &hits,
+                            offset: 0,
+                            size: wgpu::BufferSize::new(out_bytes),
+                        }),
+                    },
+                ],
             });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups((rays.len() as u32).div_ceil(64), 1, 1);
+            let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("raycast"),
+            });
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("raycast"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups((chunk.len() as u32).div_ceil(64), 1, 1);
+            }
+            enc.copy_buffer_to_buffer(&hits, 0, &read, 0, out_bytes);
+            g.queue.submit([enc.finish()]);
+            let raw = map_read(dev, &read, out_bytes)?;
+            let words: &[[f32; 4]] = bytemuck::cast_slice(&raw);
+            out.extend(words[..chunk.len()].iter().map(|h| {
+                let tri = h[1].to_bits();
+                (tri != u32::MAX).then_some(GpuHit {
+                    t: h[0],
+                    tri: tri as usize,
+                    u: h[2],
+                    v: h[3],
+                })
+            }));
         }
-        enc.copy_buffer_to_buffer(&hits, 0, &read, 0, out_bytes);
-        g.queue.submit([enc.finish()]);
-        map_read(dev, &read, out_bytes)
-    })?;
-    let words: &[[f32; 4]] = bytemuck::cast_slice(&raw);
-    Ok(words
-        .iter()
-        .map(|h| {
-            let tri = h[1].to_bits();
-            (tri != u32::MAX).then_some(GpuHit {
-                t: h[0],
-                tri: tri as usize,
-                u: h[2],
-                v: h[3],
-            })
-        })
-        .collect())
+        Ok(out)
+    })
 }
 
 #[cfg(test)]
@@ -199,6 +214,31 @@ mod tests {
             "{differ} of {} rays disagree",
             rays.len()
         );
+    }
+
+    /// Rays walked in several dispatches (a last one partly full) give the hits of one.
+    #[test]
+    fn chunked_dispatches_match_one() {
+        let g = context(DeviceChoice::Cpu).unwrap();
+        let mesh = crate::render::test_scenes::sphere_and_plate();
+        let tris: Vec<[V3; 3]> = mesh
+            .faces
+            .iter()
+            .map(|f| f.map(|k| V3::from(mesh.vertices[k as usize])))
+            .collect();
+        let bvh = Bvh::new(&tris);
+        let rays: Vec<_> = (0..2500)
+            .map(|k| {
+                let a = k as f64 * 0.618_034 * std::f64::consts::TAU;
+                let o = V3::new(3.0 * a.cos(), 3.0 * a.sin(), 0.3 * (k % 7) as f64 - 0.9);
+                (o, (-o).normalize(), 0.0, f64::INFINITY)
+            })
+            .collect();
+        let one = closest_hits_in_chunks(&g, &bvh, &rays, rays.len()).unwrap();
+        let three = closest_hits_in_chunks(&g, &bvh, &rays, 1000).unwrap();
+        assert_eq!(one.len(), rays.len());
+        assert!(one.iter().filter(|h| h.is_some()).count() > 1000);
+        assert_eq!(one, three);
     }
 
     /// No rays: no dispatch, an empty answer.
