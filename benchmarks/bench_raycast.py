@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from typing import Any
 
 import numpy as np
@@ -51,6 +50,7 @@ import trimesh
 import pprender
 from pprender import _core, models
 from bench import cpu_model, emit_report, load_average, threads_available
+from bench_render import best_time
 
 MESHES = (("CubeSat 3U", {}), ("CubeSat 3U, MLI detail 7", {"wrap": True, "detail": 7}))
 
@@ -81,15 +81,6 @@ def rays(mesh: trimesh.Trimesh, kind: str, n: int, seed: int = 11) -> tuple[np.n
     d = (r * np.cos(phi))[:, None] * t1 + (r * np.sin(phi))[:, None] * t2 + np.sqrt(1 - u1)[:, None] * nrm
     o = pts + 1e-6 * 2 * radius * nrm
     return o, d
-
-
-def best(f: Any, repeats: int) -> float:
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        f()
-        ts.append(time.perf_counter() - t0)
-    return min(ts)
 
 
 def agreement(t: np.ndarray, ref: np.ndarray, size: float) -> tuple[int, int, float]:
@@ -147,7 +138,7 @@ def measure(devices: list[str], n: int, repeats: int,
                 return np.where(out["primID"] >= 0, out["tfar"] / embree.scale, np.inf)
 
             embree_t()  # warm-up
-            t_e = best(embree_t, repeats)
+            t_e = best_time(embree_t, repeats)[0]
             t_hits = embree_t()
             differ, off, dt = agreement(t_hits, ref_t, size)
             rows.append(dict(mesh=name, tris=len(f), rays=kind, caster="Embree (1 thread)",

@@ -30,14 +30,21 @@ def _rays(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndar
     return o, d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def test_closest_hits_match_trimesh_embree(mesh) -> None:
-    o, d = _rays(mesh, 4000, 1)
-    t, tri = _core.ray_cast(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), o, d)
+def _trimesh_hits(mesh: trimesh.Trimesh, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """trimesh's closest hits (Embree through embreex): ``(t, tri)``, ``inf`` and -1 for a
+    miss."""
     loc, idx_ray, idx_tri = mesh.ray.intersects_location(o, d, multiple_hits=False)
     want_t = np.full(len(o), np.inf)
     want_tri = np.full(len(o), -1)
     want_t[idx_ray] = np.einsum("ij,ij->i", loc - o[idx_ray], d[idx_ray])
     want_tri[idx_ray] = idx_tri
+    return want_t, want_tri
+
+
+def test_closest_hits_match_trimesh_embree(mesh) -> None:
+    o, d = _rays(mesh, 4000, 1)
+    t, tri = _core.ray_cast(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), o, d)
+    want_t, want_tri = _trimesh_hits(mesh, o, d)
     size = float(np.max(mesh.extents))
     both = np.isfinite(t) & np.isfinite(want_t)
     assert both.sum() > 2000
@@ -57,11 +64,7 @@ def test_the_kernel_on_lavapipe_matches_trimesh_embree(mesh) -> None:
     o, d = _rays(mesh, 4000, 3)
     t, tri = _core.ray_cast(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), o, d,
                             device="cpu")
-    loc, idx_ray, idx_tri = mesh.ray.intersects_location(o, d, multiple_hits=False)
-    want_t = np.full(len(o), np.inf)
-    want_tri = np.full(len(o), -1)
-    want_t[idx_ray] = np.einsum("ij,ij->i", loc - o[idx_ray], d[idx_ray])
-    want_tri[idx_ray] = idx_tri
+    want_t, want_tri = _trimesh_hits(mesh, o, d)
     size = float(np.max(mesh.extents))
     both = np.isfinite(t) & np.isfinite(want_t)
     assert both.sum() > 2000

@@ -159,6 +159,17 @@ mod tests {
     use super::*;
     use crate::render::gpu::{context, DeviceChoice};
 
+    /// The tree of a smooth sphere with a thin plate in front (12,000 triangles).
+    fn sphere_and_plate_bvh() -> Bvh {
+        let mesh = crate::render::test_scenes::sphere_and_plate();
+        let tris: Vec<[V3; 3]> = mesh
+            .faces
+            .iter()
+            .map(|f| f.map(|k| V3::from(mesh.vertices[k as usize])))
+            .collect();
+        Bvh::new(&tris)
+    }
+
     /// The kernel against its f64 twin on lavapipe: rays from random points at a smooth
     /// sphere with a thin plate in front (12,000 triangles) and aimed at a dihedral's inner
     /// corner. Every ray both find a hit for meets the same triangle (or one at the same t:
@@ -168,13 +179,7 @@ mod tests {
     #[test]
     fn raycast_kernel_matches_the_bvh_twin() {
         let g = context(DeviceChoice::Cpu).unwrap();
-        let mesh = crate::render::test_scenes::sphere_and_plate();
-        let tris: Vec<[V3; 3]> = mesh
-            .faces
-            .iter()
-            .map(|f| f.map(|k| V3::from(mesh.vertices[k as usize])))
-            .collect();
-        let bvh = Bvh::new(&tris);
+        let bvh = sphere_and_plate_bvh();
         let mut state = 0x2545_f491_4f6c_dd1du64;
         let mut rand = move || {
             state ^= state << 13;
@@ -220,13 +225,7 @@ mod tests {
     #[test]
     fn chunked_dispatches_match_one() {
         let g = context(DeviceChoice::Cpu).unwrap();
-        let mesh = crate::render::test_scenes::sphere_and_plate();
-        let tris: Vec<[V3; 3]> = mesh
-            .faces
-            .iter()
-            .map(|f| f.map(|k| V3::from(mesh.vertices[k as usize])))
-            .collect();
-        let bvh = Bvh::new(&tris);
+        let bvh = sphere_and_plate_bvh();
         let rays: Vec<_> = (0..2500)
             .map(|k| {
                 let a = k as f64 * 0.618_034 * std::f64::consts::TAU;
