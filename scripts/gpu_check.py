@@ -392,6 +392,7 @@ def breakdown(device: str, batch: int = BREAKDOWN_BATCH) -> list[dict[str, Any]]
 
 #: Batch size of the scaling rows (section 8 of the module docstring).
 SCALING_BATCH = 256
+#: Rays of each kind in the ray-casting rows (section 9; 2,000 with ``--quick``).
 RAYCAST_RAYS = 1_000_000
 
 

@@ -168,6 +168,7 @@ pub(super) fn sample(lobes: &Lobes, n: V3, w_out: V3, u: [f64; 3]) -> Option<V3>
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::uniform_stream;
     use super::*;
 
     /// The directions [`sample`] draws follow [`pdf`] (the specular lobe's Jacobian
@@ -201,13 +202,7 @@ mod tests {
                 };
                 let k = 16usize;
                 let mut counts = vec![0usize; k * k];
-                let mut state = 0x9e37_79b9_7f4a_7c15u64;
-                let mut rand = || {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    (state >> 11) as f64 / (1u64 << 53) as f64
-                };
+                let mut rand = uniform_stream(0x9e37_79b9_7f4a_7c15);
                 let mut kept = 0usize;
                 for _ in 0..n_draws {
                     let Some(w) = sample(&lobes, n, w_out, [rand(), rand(), rand()]) else {

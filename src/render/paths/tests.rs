@@ -90,7 +90,7 @@ fn sensor_with(res: usize, bounces: usize, samples: usize, seed: u32) -> SensorS
 }
 
 /// Uniforms in `[0, 1)` from a xorshift64 stream seeded with `state` (test inputs).
-fn uniform_stream(mut state: u64) -> impl FnMut() -> f64 {
+pub(super) fn uniform_stream(mut state: u64) -> impl FnMut() -> f64 {
     move || {
         state ^= state << 13;
         state ^= state >> 7;
